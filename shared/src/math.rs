@@ -1,0 +1,212 @@
+//! Math types with names that say what a number is.
+//!
+//! All geometry is `f64`, 3D, in the `map` frame of ROS REP 103 (x forward, y left,
+//! z up). Covariances are SPD-checked newtypes: a [`Cov3`] in a signature is a
+//! valid rover belief covariance, not just any 3×3 matrix.
+//!
+//! ```
+//! use dyfos_shared::math::{Cov2, wrap_angle};
+//! use nalgebra::Matrix2;
+//! use std::f64::consts::PI;
+//!
+//! assert!(Cov2::new(Matrix2::new(1.0, 0.0, 0.0, -1.0)).is_err());
+//! assert_eq!(wrap_angle(PI), -PI);
+//! ```
+
+pub use nalgebra::{Isometry3, Matrix2, Matrix3, Point2, Point3, Rotation3, UnitQuaternion, Vector2, Vector3};
+use std::f64::consts::PI;
+
+/// Wraps an angle into `[−π, π)`; π itself reads as −π (SPEC §4).
+#[inline]
+pub fn wrap_angle(a: f64) -> f64 {
+    let w = (a + PI).rem_euclid(2.0 * PI) - PI;
+    // rem_euclid can round up to exactly 2π for tiny negative inputs.
+    if w >= PI { w - 2.0 * PI } else { w }
+}
+
+/// Rotation about +z by `yaw`.
+#[inline]
+pub fn rot_z(yaw: f64) -> Matrix3<f64> {
+    let (s, c) = yaw.sin_cos();
+    Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
+}
+
+/// Rotation about +y by `pitch`, right-handed: positive pitch turns +x towards −z.
+#[inline]
+pub fn rot_y(pitch: f64) -> Matrix3<f64> {
+    let (s, c) = pitch.sin_cos();
+    Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
+}
+
+/// A quaternion written `[x, y, z, w]` in SPEC §3's canonical sign: w ≥ 0, and where
+/// w = 0 the first non-zero of x, y, z positive.
+pub fn canonical_xyzw(q: &UnitQuaternion<f64>) -> [f64; 4] {
+    let c = q.coords; // nalgebra stores (i, j, k, w)
+    let mut v = [c.x, c.y, c.z, c.w];
+    let flip = if v[3] != 0.0 {
+        v[3] < 0.0
+    } else {
+        v[..3].iter().find(|x| **x != 0.0).is_some_and(|x| *x < 0.0)
+    };
+    if flip {
+        v.iter_mut().for_each(|x| *x = -*x);
+    }
+    v.iter_mut().for_each(|x| *x += 0.0); // -0.0 → 0.0
+    v
+}
+
+/// Why a matrix is not a valid covariance.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum CovarianceError {
+    /// An entry is NaN or infinite.
+    #[error("entry ({row}, {col}) is not finite ({value})")]
+    NotFinite {
+        /// Row of the entry.
+        row: usize,
+        /// Column of the entry.
+        col: usize,
+        /// The value found.
+        value: f64,
+    },
+    /// `|Σ_ij − Σ_ji|` exceeds `1e-9·max(1, max|Σ|)` (SPEC §11).
+    #[error("not symmetric: entries ({row}, {col}) and ({col}, {row}) differ by {diff:e}")]
+    NotSymmetric {
+        /// Row of the first entry.
+        row: usize,
+        /// Column of the first entry.
+        col: usize,
+        /// The absolute difference.
+        diff: f64,
+    },
+    /// The matrix has a non-positive eigenvalue (Cholesky fails).
+    #[error("not positive definite")]
+    NotPositiveDefinite,
+}
+
+fn check_spd<const N: usize>(m: &nalgebra::SMatrix<f64, N, N>) -> Result<(), CovarianceError>
+where
+    nalgebra::Const<N>: nalgebra::DimMin<nalgebra::Const<N>, Output = nalgebra::Const<N>>,
+{
+    let mut max_abs: f64 = 0.0;
+    for row in 0..N {
+        for col in 0..N {
+            let value = m[(row, col)];
+            if !value.is_finite() {
+                return Err(CovarianceError::NotFinite { row, col, value });
+            }
+            max_abs = max_abs.max(value.abs());
+        }
+    }
+    let tol = 1e-9 * max_abs.max(1.0);
+    for row in 0..N {
+        for col in row + 1..N {
+            let diff = (m[(row, col)] - m[(col, row)]).abs();
+            if diff > tol {
+                return Err(CovarianceError::NotSymmetric { row, col, diff });
+            }
+        }
+    }
+    // Cholesky reads the lower triangle only; symmetric up to `tol` makes that fair.
+    match nalgebra::Cholesky::new(*m) {
+        Some(ch) if ch.l_dirty().diagonal().iter().all(|d| *d > 0.0 && d.is_finite()) => Ok(()),
+        _ => Err(CovarianceError::NotPositiveDefinite),
+    }
+}
+
+macro_rules! covariance {
+    ($name:ident, $n:literal, $mat:ident, $doc:literal) => {
+        #[doc = $doc]
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        pub struct $name($mat<f64>);
+
+        impl $name {
+            /// Checks that `m` is finite, symmetric (SPEC §11's tolerance) and positive definite.
+            pub fn new(m: $mat<f64>) -> Result<Self, CovarianceError> {
+                check_spd::<$n>(&m)?;
+                Ok(Self(m))
+            }
+
+            /// Wraps `m` without checking. Use only where `m` is SPD by construction
+            /// (a sum of SPD matrices, a model's output).
+            #[inline]
+            pub fn new_unchecked(m: $mat<f64>) -> Self {
+                Self(m)
+            }
+
+            /// The matrix.
+            #[inline]
+            pub fn matrix(&self) -> &$mat<f64> {
+                &self.0
+            }
+
+            /// The rows, for JSON and wire output.
+            pub fn to_rows(&self) -> [[f64; $n]; $n] {
+                std::array::from_fn(|r| std::array::from_fn(|c| self.0[(r, c)]))
+            }
+
+            /// Builds from rows (checked).
+            pub fn from_rows(rows: &[[f64; $n]; $n]) -> Result<Self, CovarianceError> {
+                Self::new($mat::from_fn(|r, c| rows[r][c]))
+            }
+        }
+    };
+}
+
+covariance!(Cov2, 2, Matrix2, "A 2×2 covariance (measurement noise R), symmetric positive definite.");
+covariance!(Cov3, 3, Matrix3, "A 3×3 covariance over (x, y, θ), symmetric positive definite.");
+
+/// Determinant of a 2×2 matrix, closed form.
+#[inline]
+pub fn det2(m: &Matrix2<f64>) -> f64 {
+    m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)]
+}
+
+/// Rows of a 3×3 matrix, for JSON output.
+pub fn rows3(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wrap_angle_range() {
+        for a in [-10.0, -PI, -PI + 1e-12, 0.0, PI - 1e-12, PI, 3.0 * PI, 1e6] {
+            let w = wrap_angle(a);
+            assert!((-PI..PI).contains(&w), "{a} -> {w}");
+            assert!(((w - a) / (2.0 * PI)).round() * 2.0 * PI - (w - a) < 1e-6);
+        }
+        assert_eq!(wrap_angle(PI), -PI);
+        assert_eq!(wrap_angle(-PI), -PI);
+    }
+
+    #[test]
+    fn canonical_quaternion_sign() {
+        let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(-0.5, 0.5, -0.5, 0.5));
+        assert_eq!(canonical_xyzw(&q), [-0.5, 0.5, -0.5, 0.5]);
+        let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(0.0, 0.0, -1.0, 0.0));
+        assert_eq!(canonical_xyzw(&q), [0.0, 1.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn covariance_checks() {
+        assert!(Cov3::from_rows(&[[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).is_ok());
+        assert!(matches!(
+            Cov3::from_rows(&[[0.2, 0.06, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]),
+            Err(CovarianceError::NotSymmetric { row: 0, col: 1, .. })
+        ));
+        assert_eq!(
+            Cov2::from_rows(&[[1.0, 2.0], [2.0, 1.0]]),
+            Err(CovarianceError::NotPositiveDefinite)
+        );
+        assert!(matches!(
+            Cov2::from_rows(&[[f64::NAN, 0.0], [0.0, 1.0]]),
+            Err(CovarianceError::NotFinite { row: 0, col: 0, .. })
+        ));
+        assert_eq!(
+            Cov2::from_rows(&[[0.0, 0.0], [0.0, 1.0]]),
+            Err(CovarianceError::NotPositiveDefinite)
+        );
+    }
+}

@@ -1,0 +1,186 @@
+//! The problem's parameters (SPEC §2, §3, §6, §11) with SPEC's defaults.
+//!
+//! ```
+//! use dyfos_shared::params::Params;
+//!
+//! let p = Params::default();
+//! assert_eq!(p.rho_max, 6.0);
+//! assert!(p.validate().is_ok());
+//! let bad = Params { rho_min: 7.0, ..Params::default() };
+//! assert_eq!(bad.validate().unwrap_err().to_string(), "rho_min = 7 must be < rho_max = 6");
+//! ```
+
+use crate::limits::MAX_PERIMETER_POINTS;
+use crate::math::Vector3;
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// Which SDSMM predicts the measurement noise (SPEC §6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ModelKind {
+    /// The paper's isotropic linear model.
+    #[default]
+    Paper,
+    /// `paper`'s variance stretched along the line of sight.
+    Anisotropic,
+    /// A trained probabilistic neural network, loaded from a file.
+    Learned,
+}
+
+impl ModelKind {
+    /// The name used in scenario files.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Paper => "paper",
+            ModelKind::Anisotropic => "anisotropic",
+            ModelKind::Learned => "learned",
+        }
+    }
+}
+
+/// Rover, viewer, camera and model parameters. [`Params::default`] is SPEC's table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Params {
+    /// Rover footprint radius, m (SPEC §2).
+    pub rover_radius: f64,
+    /// Target points on the footprint circle besides the marker centre.
+    pub perimeter_points: u32,
+    /// Marker side, m.
+    pub marker_size: f64,
+    /// Marker height above ground, m.
+    pub marker_height: f64,
+    /// Viewer body radius, m (SPEC §3).
+    pub viewer_radius: f64,
+    /// Extra clearance for the collision rays, m (SPEC §5).
+    pub safety_margin: f64,
+    /// Lowest viewer altitude, m.
+    pub z_min: f64,
+    /// Highest viewer altitude, m.
+    pub z_max: f64,
+    /// Downward camera pitch, rad (positive looks down).
+    pub camera_pitch: f64,
+    /// Camera translation in the level viewer frame, m.
+    pub t_vs: Vector3<f64>,
+    /// Horizontal field of view, rad.
+    pub f_h: f64,
+    /// Vertical field of view, rad.
+    pub f_v: f64,
+    /// Shortest detection range, m.
+    pub rho_min: f64,
+    /// Longest detection range, m.
+    pub rho_max: f64,
+    /// Sun-glare lobe exponent κ.
+    pub kappa: f64,
+    /// Anisotropy λ of the `anisotropic` model.
+    pub lambda: f64,
+    /// The SDSMM to use.
+    pub model: ModelKind,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            rover_radius: 0.75,
+            perimeter_points: 8,
+            marker_size: 0.2,
+            marker_height: 0.2,
+            viewer_radius: 0.375,
+            safety_margin: 0.25,
+            z_min: 0.5,
+            z_max: 8.0,
+            camera_pitch: 45f64.to_radians(),
+            t_vs: Vector3::new(0.1, 0.0, -0.05),
+            f_h: 69.4f64.to_radians(),
+            f_v: 42.5f64.to_radians(),
+            rho_min: 1.0,
+            rho_max: 6.0,
+            kappa: 1.0,
+            lambda: 3.0,
+            model: ModelKind::Paper,
+        }
+    }
+}
+
+/// A parameter outside its meaningful range (SPEC §11). `field` is the scenario name.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field} = {value} {rule}")]
+pub struct ParamError {
+    /// The parameter's name in scenario files, e.g. `rho_min`.
+    pub field: &'static str,
+    /// The offending value.
+    pub value: f64,
+    /// What it must satisfy, e.g. `must be > 0`.
+    pub rule: String,
+}
+
+fn require(field: &'static str, value: f64, ok: bool, rule: impl Into<String>) -> Result<(), ParamError> {
+    if !value.is_finite() {
+        return Err(ParamError { field, value, rule: "must be a finite number".into() });
+    }
+    if ok { Ok(()) } else { Err(ParamError { field, value, rule: rule.into() }) }
+}
+
+impl Params {
+    /// Checks every range of SPEC §11. The first violation is returned.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let p = self;
+        require("rover_radius", p.rover_radius, p.rover_radius > 0.0, "must be > 0")?;
+        require("viewer_radius", p.viewer_radius, p.viewer_radius > 0.0, "must be > 0")?;
+        require("marker_size", p.marker_size, p.marker_size > 0.0, "must be > 0")?;
+        require("marker_height", p.marker_height, p.marker_height >= 0.0, "must be >= 0")?;
+        require("safety_margin", p.safety_margin, p.safety_margin >= 0.0, "must be >= 0")?;
+        require("f_h", p.f_h, p.f_h > 0.0 && p.f_h < PI, "must be in (0, π)")?;
+        require("f_v", p.f_v, p.f_v > 0.0 && p.f_v < PI, "must be in (0, π)")?;
+        require("z_min", p.z_min, p.z_min >= 0.0, "must be >= 0")?;
+        require("z_max", p.z_max, p.z_max > p.z_min, format!("must be > z_min = {}", p.z_min))?;
+        require("camera_pitch", p.camera_pitch, p.camera_pitch.abs() <= FRAC_PI_2, "must be in [-π/2, π/2]")?;
+        for (i, v) in p.t_vs.iter().enumerate() {
+            require(["t_vs[0]", "t_vs[1]", "t_vs[2]"][i], *v, v.abs() <= 100.0, "must be within ±100 m")?;
+        }
+        require("rho_min", p.rho_min, p.rho_min > 0.0, "must be > 0")?;
+        require("rho_min", p.rho_min, p.rho_min < p.rho_max, format!("must be < rho_max = {}", p.rho_max))?;
+        require("rho_max", p.rho_max, p.rho_max <= 1.0e4, "must be <= 10000")?;
+        require("kappa", p.kappa, p.kappa > 0.0, "must be > 0")?;
+        require("lambda", p.lambda, p.lambda >= 0.0, "must be >= 0")?;
+        let n = f64::from(p.perimeter_points);
+        require("perimeter_points", n, p.perimeter_points <= MAX_PERIMETER_POINTS, "must be in [0, 4096]")?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid() {
+        Params::default().validate().unwrap();
+    }
+
+    #[test]
+    fn every_range_is_checked() {
+        let d = Params::default();
+        let cases: Vec<(Params, &str)> = vec![
+            (Params { rover_radius: 0.0, ..d }, "rover_radius"),
+            (Params { viewer_radius: -1.0, ..d }, "viewer_radius"),
+            (Params { marker_size: 0.0, ..d }, "marker_size"),
+            (Params { marker_height: -0.1, ..d }, "marker_height"),
+            (Params { safety_margin: -0.1, ..d }, "safety_margin"),
+            (Params { f_h: PI, ..d }, "f_h"),
+            (Params { f_v: 0.0, ..d }, "f_v"),
+            (Params { z_min: -0.5, ..d }, "z_min"),
+            (Params { z_max: 0.5, ..d }, "z_max"),
+            (Params { camera_pitch: 1.6, ..d }, "camera_pitch"),
+            (Params { rho_min: 0.0, ..d }, "rho_min"),
+            (Params { rho_min: 6.0, ..d }, "rho_min"),
+            (Params { kappa: 0.0, ..d }, "kappa"),
+            (Params { lambda: -1.0, ..d }, "lambda"),
+            (Params { perimeter_points: 4097, ..d }, "perimeter_points"),
+            (Params { kappa: f64::NAN, ..d }, "kappa"),
+            (Params { t_vs: Vector3::new(f64::INFINITY, 0.0, 0.0), ..d }, "t_vs[0]"),
+        ];
+        for (p, field) in cases {
+            assert_eq!(p.validate().unwrap_err().field, field);
+        }
+    }
+}

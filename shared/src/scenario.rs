@@ -1,0 +1,460 @@
+//! Scenario files (SPEC §11): one JSON document describes one query.
+//!
+//! Parsing is strict: unknown fields, non-finite numbers, duplicate obstacle ids, a
+//! covariance that is not symmetric positive definite and out-of-range parameters
+//! are all errors that name the field, e.g. `params.rho_min = 7 must be < rho_max = 6`.
+//!
+//! ```
+//! use dyfos_shared::scenario::Scenario;
+//!
+//! let json = r#"{"bounds": [-10, -10, 10, 10], "sun": {"elevation": 0.7, "azimuth": 2.1},
+//!   "obstacles": [], "rover": {"mean": [0, 0, 0.3], "cov": [[0.2, 0, 0], [0, 0.1, 0], [0, 0, 0.05]]},
+//!   "params": {"rho_mim": 2.0}}"#;
+//! let err = Scenario::from_json(json).unwrap_err().to_string();
+//! assert!(err.starts_with("params: unknown field `rho_mim`"), "{err}");
+//! assert!(err.contains("did you mean `rho_min`?"), "{err}");
+//! ```
+
+use crate::limits::MAX_OBSTACLES;
+use crate::math::{Point2, Point3, Vector3, rows3};
+use crate::params::{ModelKind, Params};
+use crate::posterior::Belief;
+use crate::world::{AxisBox, Bounds, Obstacle, VerticalCylinder, VoxelGrid, World};
+use serde::{Deserialize, Deserializer, Serialize};
+use std::collections::BTreeMap;
+
+/// A validated scenario: the world, the rendezvous belief and the parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    /// The environment model M, at version 0.
+    pub world: World,
+    /// The a priori rover belief at the rendezvous.
+    pub belief: Belief,
+    /// Parameters, SPEC defaults overridden by the file's `params`.
+    pub params: Params,
+}
+
+/// A scenario that cannot be used, with the path of the field at fault.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ScenarioError {
+    /// Not JSON, or not of the scenario's shape (unknown field, wrong type, missing field).
+    #[error("{}{message} (line {line}, column {column})", path_prefix(path))]
+    Malformed {
+        /// Dotted path of the field, e.g. `params.rho_min` (empty at top level).
+        path: String,
+        /// serde's message, with a suggestion for misspelt fields.
+        message: String,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+    },
+    /// Well-formed, but a value is out of range or inconsistent.
+    #[error("{path}{}{message}", if message.starts_with("= ") { " " } else { ": " })]
+    Invalid {
+        /// Dotted path of the field.
+        path: String,
+        /// What is wrong and what would be right.
+        message: String,
+    },
+}
+
+fn path_prefix(path: &str) -> String {
+    if path.is_empty() || path == "." { String::new() } else { format!("{path}: ") }
+}
+
+impl ScenarioError {
+    /// The path of the field at fault.
+    pub fn path(&self) -> &str {
+        match self {
+            ScenarioError::Malformed { path, .. } | ScenarioError::Invalid { path, .. } => path,
+        }
+    }
+
+    fn invalid(path: impl Into<String>, message: impl ToString) -> Self {
+        ScenarioError::Invalid { path: path.into(), message: message.to_string() }
+    }
+}
+
+/// Deserializes a field that may be absent but, if present, must not be `null`.
+fn present<'de, D: Deserializer<'de>, T: Deserialize<'de>>(d: D) -> Result<Option<T>, D::Error> {
+    T::deserialize(d).map(Some)
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScenario {
+    bounds: [f64; 4],
+    sun: RawSun,
+    obstacles: Vec<RawObstacle>,
+    rover: RawRover,
+    #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
+    params: Option<RawParams>,
+    #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
+    voxels: Option<RawVoxels>,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSun {
+    elevation: f64,
+    azimuth: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawObstacle {
+    id: u32,
+    #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
+    cylinder: Option<RawCylinder>,
+    #[serde(rename = "box", default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
+    box_: Option<RawBox>,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCylinder {
+    x: f64,
+    y: f64,
+    radius: f64,
+    height: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBox {
+    min: [f64; 3],
+    max: [f64; 3],
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRover {
+    mean: [f64; 3],
+    cov: [[f64; 3]; 3],
+}
+
+#[derive(Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawVoxels {
+    resolution: f64,
+    origin: [f64; 3],
+    occupied: Vec<[i64; 3]>,
+}
+
+macro_rules! raw_params {
+    ($($field:ident: $ty:ty),* $(,)?) => {
+        #[derive(Debug, Default, Serialize, Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct RawParams {
+            $(
+                #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
+                $field: Option<$ty>,
+            )*
+        }
+    };
+}
+
+raw_params!(
+    rover_radius: f64, perimeter_points: u32, marker_size: f64, marker_height: f64,
+    viewer_radius: f64, safety_margin: f64, z_min: f64, z_max: f64, camera_pitch: f64,
+    t_vs: [f64; 3], f_h: f64, f_v: f64, rho_min: f64, rho_max: f64, kappa: f64,
+    lambda: f64, model: ModelKind,
+);
+
+impl RawParams {
+    fn resolve(&self) -> Params {
+        let d = Params::default();
+        Params {
+            rover_radius: self.rover_radius.unwrap_or(d.rover_radius),
+            perimeter_points: self.perimeter_points.unwrap_or(d.perimeter_points),
+            marker_size: self.marker_size.unwrap_or(d.marker_size),
+            marker_height: self.marker_height.unwrap_or(d.marker_height),
+            viewer_radius: self.viewer_radius.unwrap_or(d.viewer_radius),
+            safety_margin: self.safety_margin.unwrap_or(d.safety_margin),
+            z_min: self.z_min.unwrap_or(d.z_min),
+            z_max: self.z_max.unwrap_or(d.z_max),
+            camera_pitch: self.camera_pitch.unwrap_or(d.camera_pitch),
+            t_vs: self.t_vs.map(Vector3::from).unwrap_or(d.t_vs),
+            f_h: self.f_h.unwrap_or(d.f_h),
+            f_v: self.f_v.unwrap_or(d.f_v),
+            rho_min: self.rho_min.unwrap_or(d.rho_min),
+            rho_max: self.rho_max.unwrap_or(d.rho_max),
+            kappa: self.kappa.unwrap_or(d.kappa),
+            lambda: self.lambda.unwrap_or(d.lambda),
+            model: self.model.unwrap_or(d.model),
+        }
+    }
+
+    /// Every parameter written out (files written by us are explicit).
+    fn explicit(p: &Params) -> Self {
+        RawParams {
+            rover_radius: Some(p.rover_radius),
+            perimeter_points: Some(p.perimeter_points),
+            marker_size: Some(p.marker_size),
+            marker_height: Some(p.marker_height),
+            viewer_radius: Some(p.viewer_radius),
+            safety_margin: Some(p.safety_margin),
+            z_min: Some(p.z_min),
+            z_max: Some(p.z_max),
+            camera_pitch: Some(p.camera_pitch),
+            t_vs: Some(p.t_vs.into()),
+            f_h: Some(p.f_h),
+            f_v: Some(p.f_v),
+            rho_min: Some(p.rho_min),
+            rho_max: Some(p.rho_max),
+            kappa: Some(p.kappa),
+            lambda: Some(p.lambda),
+            model: Some(p.model),
+        }
+    }
+}
+
+/// Edit distance, for "did you mean" suggestions.
+fn levenshtein(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for (j, cb) in b.iter().enumerate() {
+            let cur = row[j + 1];
+            row[j + 1] = (prev + usize::from(ca != *cb)).min(row[j] + 1).min(cur + 1);
+            prev = cur;
+        }
+    }
+    row[b.len()]
+}
+
+/// Appends "did you mean `x`?" to serde's unknown-field message.
+fn suggest(message: String) -> String {
+    let Some(rest) = message.strip_prefix("unknown field `") else {
+        return message;
+    };
+    let Some((field, expected)) = rest.split_once('`') else {
+        return message;
+    };
+    let best = expected
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .map(|c| (levenshtein(field, c), c))
+        .min()
+        .filter(|(d, c)| *d <= 2.max(c.len() / 3));
+    match best {
+        Some((_, c)) => format!("{message} (did you mean `{c}`?)"),
+        None => message,
+    }
+}
+
+fn inner_is_unknown_field(e: &serde_path_to_error::Error<serde_json::Error>) -> bool {
+    e.inner().to_string().starts_with("unknown field")
+}
+
+impl Scenario {
+    /// Parses and validates a scenario document.
+    pub fn from_json(json: &str) -> Result<Self, ScenarioError> {
+        let de = &mut serde_json::Deserializer::from_str(json);
+        let raw: RawScenario = serde_path_to_error::deserialize(de).map_err(|e| {
+            let mut path = e.path().to_string();
+            if inner_is_unknown_field(&e) {
+                // The path ends in the unknown name itself; report its parent.
+                path = path.rsplit_once('.').map(|(parent, _)| parent.to_string()).unwrap_or_default();
+            }
+            let inner = e.into_inner();
+            let (line, column) = (inner.line(), inner.column());
+            // serde_json appends " at line L column C"; we print those ourselves.
+            let text = inner.to_string();
+            let message = match text.rfind(" at line ") {
+                Some(i) => text[..i].to_string(),
+                None => text,
+            };
+            ScenarioError::Malformed { path, message: suggest(message), line, column }
+        })?;
+        Self::from_raw(raw)
+    }
+
+    fn from_raw(raw: RawScenario) -> Result<Self, ScenarioError> {
+        let bounds = Bounds::new(raw.bounds).map_err(|e| ScenarioError::invalid("bounds", e.problem))?;
+        let sun = crate::world::Sun::new(raw.sun.elevation, raw.sun.azimuth)
+            .map_err(|e| ScenarioError::invalid(format!("sun.{}", e.field), format!("= {} {}", e.value, e.rule)))?;
+        if raw.obstacles.len() > MAX_OBSTACLES {
+            return Err(ScenarioError::invalid(
+                "obstacles",
+                format!("{} obstacles exceed the limit of {MAX_OBSTACLES}", raw.obstacles.len()),
+            ));
+        }
+        let mut first_index: BTreeMap<u32, usize> = BTreeMap::new();
+        let mut obstacles = Vec::with_capacity(raw.obstacles.len());
+        for (i, o) in raw.obstacles.iter().enumerate() {
+            let (kind, obstacle) = match (&o.cylinder, &o.box_) {
+                (Some(c), None) => (
+                    "cylinder",
+                    Obstacle::Cylinder(VerticalCylinder {
+                        center: Point2::new(c.x, c.y),
+                        radius: c.radius,
+                        height: c.height,
+                    }),
+                ),
+                (None, Some(b)) => {
+                    ("box", Obstacle::Box(AxisBox { min: Point3::from(b.min), max: Point3::from(b.max) }))
+                }
+                _ => {
+                    return Err(ScenarioError::invalid(
+                        format!("obstacles[{i}]"),
+                        "needs exactly one of `cylinder` or `box`",
+                    ));
+                }
+            };
+            obstacle.validate().map_err(|e| ScenarioError::invalid(format!("obstacles[{i}].{kind}"), e))?;
+            if let Some(j) = first_index.insert(o.id, i) {
+                return Err(ScenarioError::invalid(
+                    format!("obstacles[{i}].id"),
+                    format!("duplicate obstacle id {} (also obstacles[{j}])", o.id),
+                ));
+            }
+            obstacles.push((o.id, obstacle));
+        }
+        let voxels = match &raw.voxels {
+            None => None,
+            Some(v) => Some(
+                VoxelGrid::new(v.resolution, Point3::from(v.origin), v.occupied.iter().copied())
+                    .map_err(|e| ScenarioError::invalid("voxels", e))?,
+            ),
+        };
+        let world = World::new(0, bounds, sun, obstacles, voxels).map_err(|e| ScenarioError::invalid("obstacles", e))?;
+        let belief = Belief::new(raw.rover.mean, raw.rover.cov).map_err(|e| match e {
+            crate::posterior::BeliefError::Mean { index, value } => {
+                ScenarioError::invalid(format!("rover.mean[{index}]"), format!("= {value} must be a finite number"))
+            }
+            crate::posterior::BeliefError::Covariance(c) => {
+                ScenarioError::invalid("rover.cov", format!("{c}: need a symmetric positive definite matrix"))
+            }
+        })?;
+        let params = raw.params.as_ref().map(RawParams::resolve).unwrap_or_default();
+        params.validate().map_err(|e| {
+            ScenarioError::invalid(format!("params.{}", e.field), format!("= {} {}", e.value, e.rule))
+        })?;
+        Ok(Scenario { world, belief, params })
+    }
+
+    /// The scenario as a JSON document that [`Scenario::from_json`] reads back to an
+    /// equal scenario; every parameter is written out.
+    pub fn to_json(&self) -> String {
+        let w = &self.world;
+        let raw = RawScenario {
+            bounds: w.bounds().to_array(),
+            sun: RawSun { elevation: w.sun().elevation, azimuth: w.sun().azimuth },
+            obstacles: w
+                .obstacles()
+                .iter()
+                .map(|(id, o)| match o {
+                    Obstacle::Cylinder(c) => RawObstacle {
+                        id: *id,
+                        cylinder: Some(RawCylinder { x: c.center.x, y: c.center.y, radius: c.radius, height: c.height }),
+                        box_: None,
+                    },
+                    Obstacle::Box(b) => RawObstacle {
+                        id: *id,
+                        cylinder: None,
+                        box_: Some(RawBox { min: b.min.coords.into(), max: b.max.coords.into() }),
+                    },
+                })
+                .collect(),
+            rover: RawRover { mean: self.belief.mean.into(), cov: rows3(self.belief.cov.matrix()) },
+            params: Some(RawParams::explicit(&self.params)),
+            voxels: w.voxels().map(|v| RawVoxels {
+                resolution: v.resolution(),
+                origin: v.origin().coords.into(),
+                occupied: v.occupied().copied().collect(),
+            }),
+        };
+        serde_json::to_string_pretty(&raw).expect("scenario serializes")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"{
+      "bounds": [-10.0, -10.0, 10.0, 10.0],
+      "sun": {"elevation": 0.7, "azimuth": 2.1},
+      "obstacles": [
+        {"id": 1, "cylinder": {"x": 2.0, "y": 1.0, "radius": 0.5, "height": 10.0}},
+        {"id": 2, "box": {"min": [4.0, 4.0, 0.0], "max": [5.0, 6.0, 3.0]}}
+      ],
+      "rover": {"mean": [0.0, 0.0, 0.3],
+                "cov": [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]},
+      "params": {"model": "paper"}
+    }"#;
+
+    fn with(from: &str, to: &str) -> Result<Scenario, ScenarioError> {
+        assert!(GOOD.contains(from), "test edit `{from}` does not apply");
+        Scenario::from_json(&GOOD.replacen(from, to, 1))
+    }
+
+    #[test]
+    fn spec_example_parses() {
+        let s = Scenario::from_json(GOOD).unwrap();
+        assert_eq!(s.world.obstacles().len(), 2);
+        assert_eq!(s.params.model, ModelKind::Paper);
+        assert_eq!(s.belief.mean.z, 0.3);
+    }
+
+    #[test]
+    fn round_trips_through_json() {
+        let s = with("\"params\": {\"model\": \"paper\"}", r#""params": {"model": "anisotropic", "lambda": 2.0}, "voxels": {"resolution": 0.1, "origin": [0, 0, 0], "occupied": [[1, 2, 3]]}"#).unwrap();
+        assert_eq!(Scenario::from_json(&s.to_json()).unwrap(), s);
+    }
+
+    /// Each bad edit of the SPEC example, and the path its error must name.
+    #[test]
+    fn every_validation_error_names_its_field() {
+        let cases = [
+            ("\"sun\"", "\"sunn\"", ""),
+            ("\"model\": \"paper\"", "\"model\": \"paper\", \"rho_mim\": 1", "params"),
+            ("\"model\": \"paper\"", "\"model\": \"neural\"", "params.model"),
+            ("\"model\": \"paper\"", "\"perimeter_points\": 8.0", "params.perimeter_points"),
+            ("\"model\": \"paper\"", "\"perimeter_points\": -1", "params.perimeter_points"),
+            ("\"model\": \"paper\"", "\"perimeter_points\": 4097", "params.perimeter_points"),
+            ("\"model\": \"paper\"", "\"rho_min\": 7", "params.rho_min"),
+            ("\"model\": \"paper\"", "\"f_h\": 3.2", "params.f_h"),
+            ("\"model\": \"paper\"", "\"kappa\": 0", "params.kappa"),
+            ("\"model\": \"paper\"", "\"lambda\": -1", "params.lambda"),
+            ("\"model\": \"paper\"", "\"z_min\": 9", "params.z_max"),
+            ("\"model\": \"paper\"", "\"camera_pitch\": 2", "params.camera_pitch"),
+            ("\"model\": \"paper\"", "\"marker_height\": -0.1", "params.marker_height"),
+            ("\"model\": \"paper\"", "\"rover_radius\": 0", "params.rover_radius"),
+            ("\"params\": {\"model\": \"paper\"}", "\"params\": null", "params"),
+            ("\"params\": {\"model\": \"paper\"}", "\"params\": 3", "params"),
+            ("\"radius\": 0.5", "\"radius\": -0.5", "obstacles[0].cylinder"),
+            ("\"height\": 10.0", "\"height\": 0", "obstacles[0].cylinder"),
+            ("\"max\": [5.0, 6.0, 3.0]", "\"max\": [5.0, 6.0, 0.0]", "obstacles[1].box"),
+            ("{\"id\": 2, \"box\"", "{\"id\": 1, \"box\"", "obstacles[1].id"),
+            ("\"cylinder\": {\"x\": 2.0", "\"cone\": {\"x\": 2.0", "obstacles[0]"),
+            ("[-10.0, -10.0, 10.0, 10.0]", "[10.0, -10.0, -10.0, 10.0]", "bounds"),
+            ("[-10.0, -10.0, 10.0, 10.0]", "[-10.0, -10.0, 1e999, 10.0]", "bounds[2]"),
+            ("\"elevation\": 0.7", "\"elevation\": 1.7", "sun.elevation"),
+            ("[0.05, 0.1, 0.0]", "[0.06, 0.1, 0.0]", "rover.cov"),
+            ("[0.0, 0.0, 0.05]]", "[0.0, 0.0, -0.05]]", "rover.cov"),
+            ("\"mean\": [0.0, 0.0, 0.3]", "\"mean\": [0.0, NaN, 0.3]", "rover.mean[1]"),
+            ("\"params\": {\"model\": \"paper\"}", "\"voxels\": {\"resolution\": 0, \"origin\": [0,0,0], \"occupied\": []}", "voxels"),
+        ];
+        for (from, to, path) in cases {
+            let err = with(from, to).unwrap_err();
+            assert_eq!(err.path(), path, "`{to}` gave `{err}`");
+            assert!(!err.to_string().is_empty());
+        }
+        assert!(matches!(Scenario::from_json("{"), Err(ScenarioError::Malformed { .. })));
+        assert!(matches!(Scenario::from_json("[]"), Err(ScenarioError::Malformed { .. })));
+    }
+
+    #[test]
+    fn messages_say_what_to_do() {
+        let err = with("\"model\": \"paper\"", "\"rho_min\": 7").unwrap_err();
+        assert_eq!(err.to_string(), "params.rho_min = 7 must be < rho_max = 6");
+        let err = with("\"model\": \"paper\"", "\"kapa\": 2").unwrap_err();
+        assert!(err.to_string().contains("did you mean `kappa`?"), "{err}");
+    }
+}

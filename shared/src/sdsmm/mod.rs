@@ -1,0 +1,127 @@
+//! SDSMM: the state-dependent sensor measurement model (SPEC §6).
+//!
+//! [`Features`] are what can be predicted about a measurement before it is taken:
+//! where the rover will appear in the image, how far it is, how much sun glare the
+//! marker reflects into the camera, and the viewing geometry. An [`Sdsmm`] maps
+//! them to the measurement noise R on the rover's (x, y).
+//!
+//! ```
+//! use dyfos_shared::params::Params;
+//! use dyfos_shared::sdsmm::{Features, Paper, Sdsmm};
+//! use dyfos_shared::sensor::{SensorRig, SensorState};
+//! use dyfos_shared::world::Sun;
+//! use nalgebra::Point3;
+//!
+//! let params = Params::default();
+//! let target = Point3::new(0.0, 0.0, 0.2);
+//! let pose = SensorRig::new(&params).pose(&target, &SensorState::new(1.0, 0.0, 0.0, 0.0));
+//! // Sun behind the camera (azimuth π, camera looking along +x): no glare.
+//! let sun = Sun::new(0.5, std::f64::consts::PI).unwrap().direction();
+//! let f = Features::new(&params, &sun, &pose, &target);
+//! assert_eq!((f.e, f.s, f.c), (0.0, 0.0, 0.0));
+//! let r = Paper.noise(&f);
+//! assert!((r.matrix()[(0, 0)] - 2.0 * 0.03f64.powi(2)).abs() < 1e-15); // σ1² + σ2²
+//! ```
+
+mod anisotropic;
+mod paper;
+
+pub use anisotropic::Anisotropic;
+pub use paper::{Paper, paper_variance};
+
+use crate::math::{Cov2, Point3, Vector3};
+use crate::params::{ModelKind, Params};
+use crate::sensor::SensorPose;
+
+/// The predictable features of one measurement (SPEC §6).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Features {
+    /// Horizontal image coordinate, −1..1 across the field of view.
+    pub u: f64,
+    /// Vertical image coordinate, −1..1 across the field of view.
+    pub v: f64,
+    /// Distance from the image centre, `min(1, max(|u|, |v|))`.
+    pub e: f64,
+    /// Normalised distance, `clamp((ρ − ρ_min)/(ρ_max − ρ_min), 0, 1)`.
+    pub s: f64,
+    /// Sun glare, `2·max(0, r·w)^κ` (0 with the sun at or below the horizon).
+    pub c: f64,
+    /// Unit view direction from the marker to the sensor.
+    pub w: Vector3<f64>,
+    /// Viewing elevation ε = atan2(w_z, |w_xy|).
+    pub elevation: f64,
+    /// Bearing β from the sensor to the rover.
+    pub bearing: f64,
+    /// Distance ρ from the sensor to the marker, m.
+    pub rho: f64,
+}
+
+impl Features {
+    /// The features of observing the marker centre `target` from `pose` under a sun
+    /// with unit direction `sun` (SPEC §6). ρ is measured, so this also serves the
+    /// true states of a simulation.
+    #[inline]
+    pub fn new(params: &Params, sun: &Vector3<f64>, pose: &SensorPose, target: &Point3<f64>) -> Self {
+        let q = pose.to_sensor(target);
+        let u = (q.y / q.x) / (params.f_h / 2.0).tan();
+        let v = (q.z / q.x) / (params.f_v / 2.0).tan();
+        let e = u.abs().max(v.abs()).min(1.0);
+        let to_sensor = pose.position - target;
+        let rho = to_sensor.norm();
+        let s = ((rho - params.rho_min) / (params.rho_max - params.rho_min)).clamp(0.0, 1.0);
+        let w = to_sensor / rho;
+        let c = if sun.z <= 0.0 {
+            0.0
+        } else {
+            let reflected = Vector3::new(-sun.x, -sun.y, sun.z);
+            2.0 * reflected.dot(&w).max(0.0).powf(params.kappa)
+        };
+        let elevation = w.z.atan2(w.x.hypot(w.y));
+        let bearing = (target.y - pose.position.y).atan2(target.x - pose.position.x);
+        Features { u, v, e, s, c, w, elevation, bearing, rho }
+    }
+}
+
+/// A state-dependent measurement model: features in, noise covariance R out.
+pub trait Sdsmm {
+    /// The predicted covariance of the measured rover (x, y), m².
+    fn noise(&self, features: &Features) -> Cov2;
+}
+
+/// The model a request chose (SPEC §6), dispatched statically.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NoiseModel {
+    /// The paper's isotropic model.
+    Paper(Paper),
+    /// The line-of-sight stretched model.
+    Anisotropic(Anisotropic),
+}
+
+/// A model that cannot be built from the parameters.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NoiseModelError {
+    /// `learned` needs weights, which this caller did not load.
+    #[error("model `learned` needs trained weights; pass a model file (e.g. `--model model.bin`)")]
+    LearnedWithoutWeights,
+}
+
+impl NoiseModel {
+    /// The model named by `params.model`, with its parameters.
+    pub fn from_params(params: &Params) -> Result<Self, NoiseModelError> {
+        match params.model {
+            ModelKind::Paper => Ok(NoiseModel::Paper(Paper)),
+            ModelKind::Anisotropic => Ok(NoiseModel::Anisotropic(Anisotropic { lambda: params.lambda })),
+            ModelKind::Learned => Err(NoiseModelError::LearnedWithoutWeights),
+        }
+    }
+}
+
+impl Sdsmm for NoiseModel {
+    #[inline]
+    fn noise(&self, features: &Features) -> Cov2 {
+        match self {
+            NoiseModel::Paper(m) => m.noise(features),
+            NoiseModel::Anisotropic(m) => m.noise(features),
+        }
+    }
+}

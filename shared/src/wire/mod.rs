@@ -1,0 +1,1 @@
+//! Wire types of the daemon's iceoryx2 services (see `dyfosd`).

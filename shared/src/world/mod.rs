@@ -1,0 +1,439 @@
+//! The environment model M of SPEC §1: bounds, sun, obstacles, voxels, and the
+//! segment queries the constraints need.
+//!
+//! A [`World`] is immutable. A batch of [`MapDelta`]s makes a new one
+//! ([`World::apply`]), or fails whole and leaves the old one as it was: that is what
+//! makes map updates atomic for the daemon. Queries go through a bounding-volume
+//! hierarchy (parry's `Bvh`) whose leaves are the obstacles, plus one leaf for the
+//! voxel grid, each tested exactly.
+//!
+//! ```
+//! use dyfos_shared::world::{Bounds, MapDelta, Obstacle, Segment, Sun, VerticalCylinder, World};
+//! use nalgebra::{Point2, Point3, Vector3};
+//!
+//! let world = World::empty(Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(), Sun::new(0.7, 2.1).unwrap());
+//! let pole = Obstacle::Cylinder(VerticalCylinder { center: Point2::new(2.0, 0.0), radius: 0.5, height: 10.0 });
+//! let world = world.apply(&[MapDelta::UpsertObstacle { id: 7, obstacle: pole }]).unwrap();
+//! assert_eq!(world.version(), 1);
+//! let ray = Segment::closed(Point3::new(0.0, 0.0, 1.0), Vector3::x(), 5.0);
+//! assert!(world.any_contact(&[ray]));
+//! ```
+
+mod delta;
+mod obstacle;
+mod segment;
+mod voxels;
+
+pub use delta::{MapDelta, MapDeltaError, MapDeltaErrorKind};
+pub use obstacle::{AxisBox, Obstacle, ObstacleError, VerticalCylinder};
+pub use segment::{Segment, SegmentEnd};
+pub use voxels::{CellIndex, VoxelError, VoxelGrid};
+
+use crate::limits::{MAX_COORDINATE, MAX_OBSTACLES};
+use crate::math::{Point2, Point3, Vector3};
+use parry3d_f64::bounding_volume::Aabb;
+use parry3d_f64::partitioning::{Bvh, BvhBuildStrategy, TraversalAction};
+use segment::first_contact_aabb;
+use std::collections::BTreeMap;
+use std::f64::consts::FRAC_PI_2;
+
+/// The map's axis-aligned rectangle, `[x_min, y_min, x_max, y_max]` in files.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Bounds {
+    /// (x_min, y_min).
+    pub min: Point2<f64>,
+    /// (x_max, y_max).
+    pub max: Point2<f64>,
+}
+
+/// Why bounds are invalid.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("bounds {bounds:?}: {problem}")]
+pub struct BoundsError {
+    /// The rejected bounds.
+    pub bounds: [f64; 4],
+    /// What is wrong.
+    pub problem: &'static str,
+}
+
+impl Bounds {
+    /// Checks finite numbers within ±1e6 and min < max.
+    pub fn new(b: [f64; 4]) -> Result<Self, BoundsError> {
+        if !b.iter().all(|v| v.is_finite() && v.abs() <= MAX_COORDINATE) {
+            return Err(BoundsError { bounds: b, problem: "every number must be finite and within ±1e6" });
+        }
+        if !(b[0] < b[2] && b[1] < b[3]) {
+            return Err(BoundsError { bounds: b, problem: "need x_min < x_max and y_min < y_max" });
+        }
+        Ok(Bounds { min: Point2::new(b[0], b[1]), max: Point2::new(b[2], b[3]) })
+    }
+
+    /// `[x_min, y_min, x_max, y_max]`.
+    pub fn to_array(&self) -> [f64; 4] {
+        [self.min.x, self.min.y, self.max.x, self.max.y]
+    }
+
+    /// Whether (x, y) is inside, boundary included.
+    #[inline]
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        self.min.x <= x && x <= self.max.x && self.min.y <= y && y <= self.max.y
+    }
+}
+
+/// The sun's direction: elevation above the horizon and azimuth from +x towards +y.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Sun {
+    /// Elevation, rad, in [−π/2, π/2].
+    pub elevation: f64,
+    /// Azimuth, rad.
+    pub azimuth: f64,
+}
+
+/// Why a sun is invalid.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("sun.{field} = {value} {rule}")]
+pub struct SunError {
+    /// `elevation` or `azimuth`.
+    pub field: &'static str,
+    /// The rejected value.
+    pub value: f64,
+    /// What it must satisfy.
+    pub rule: &'static str,
+}
+
+impl Sun {
+    /// Checks elevation ∈ [−π/2, π/2] and a finite azimuth (|az| ≤ 1e6).
+    pub fn new(elevation: f64, azimuth: f64) -> Result<Self, SunError> {
+        if !(elevation.is_finite() && elevation.abs() <= FRAC_PI_2) {
+            return Err(SunError { field: "elevation", value: elevation, rule: "must be in [-π/2, π/2]" });
+        }
+        if !(azimuth.is_finite() && azimuth.abs() <= MAX_COORDINATE) {
+            return Err(SunError { field: "azimuth", value: azimuth, rule: "must be a finite number" });
+        }
+        Ok(Sun { elevation, azimuth })
+    }
+
+    /// The unit vector ŝ from the scene towards the sun (SPEC §1).
+    pub fn direction(&self) -> Vector3<f64> {
+        let (se, ce) = self.elevation.sin_cos();
+        let (sa, ca) = self.azimuth.sin_cos();
+        Vector3::new(ce * ca, ce * sa, se)
+    }
+}
+
+/// What a segment touched, for reports (`dyfos eval`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Blocker {
+    /// The obstacle with this id.
+    Obstacle(u32),
+    /// An occupied voxel cell.
+    Voxels,
+}
+
+/// One leaf of the query BVH.
+#[derive(Debug, Clone, Copy)]
+enum Leaf {
+    Solid { id: u32, shape: Obstacle },
+    Voxels,
+}
+
+/// Leaves are padded by this much so that a segment exactly touching an obstacle's
+/// face always reaches the exact leaf test.
+const LEAF_PAD: f64 = 1e-7;
+
+/// Most leaves gathered on the stack for a batch of segments before falling back to
+/// one BVH walk per segment.
+const GATHER_CAPACITY: usize = 32;
+
+/// The environment model: an immutable snapshot at one version.
+#[derive(Debug, Clone)]
+pub struct World {
+    version: u64,
+    bounds: Bounds,
+    sun: Sun,
+    obstacles: BTreeMap<u32, Obstacle>,
+    voxels: Option<VoxelGrid>,
+    bvh: Bvh,
+    leaves: Vec<Leaf>,
+}
+
+impl PartialEq for World {
+    /// Equal content and version; the acceleration structure is derived.
+    fn eq(&self, other: &Self) -> bool {
+        self.version == other.version
+            && self.bounds == other.bounds
+            && self.sun == other.sun
+            && self.obstacles == other.obstacles
+            && self.voxels == other.voxels
+    }
+}
+
+impl World {
+    /// A world with no obstacles, at version 0.
+    pub fn empty(bounds: Bounds, sun: Sun) -> Self {
+        Self::assemble(0, bounds, sun, BTreeMap::new(), None)
+    }
+
+    /// A world with the given content. Obstacles are validated; ids must be unique.
+    pub fn new(
+        version: u64,
+        bounds: Bounds,
+        sun: Sun,
+        obstacles: impl IntoIterator<Item = (u32, Obstacle)>,
+        voxels: Option<VoxelGrid>,
+    ) -> Result<Self, MapDeltaErrorKind> {
+        let mut map = BTreeMap::new();
+        for (id, obstacle) in obstacles {
+            obstacle.validate().map_err(|source| MapDeltaErrorKind::InvalidObstacle { id, source })?;
+            if map.insert(id, obstacle).is_some() {
+                return Err(MapDeltaErrorKind::DuplicateId { id });
+            }
+            if map.len() > MAX_OBSTACLES {
+                return Err(MapDeltaErrorKind::TooManyObstacles { count: map.len() });
+            }
+        }
+        Ok(Self::assemble(version, bounds, sun, map, voxels))
+    }
+
+    fn assemble(
+        version: u64,
+        bounds: Bounds,
+        sun: Sun,
+        obstacles: BTreeMap<u32, Obstacle>,
+        voxels: Option<VoxelGrid>,
+    ) -> Self {
+        let mut leaves: Vec<Leaf> = obstacles.iter().map(|(id, shape)| Leaf::Solid { id: *id, shape: *shape }).collect();
+        let mut boxes: Vec<Aabb> = obstacles.values().map(|o| padded(o.aabb())).collect();
+        if let Some(aabb) = voxels.as_ref().and_then(VoxelGrid::aabb) {
+            leaves.push(Leaf::Voxels);
+            boxes.push(padded(aabb));
+        }
+        let bvh = if boxes.is_empty() { Bvh::new() } else { Bvh::from_leaves(BvhBuildStrategy::Binned, &boxes) };
+        World { version, bounds, sun, obstacles, voxels, bvh, leaves }
+    }
+
+    /// The map version: 0 when created, +1 per accepted delta.
+    pub fn version(&self) -> u64 {
+        self.version
+    }
+
+    /// The map bounds.
+    pub fn bounds(&self) -> &Bounds {
+        &self.bounds
+    }
+
+    /// The sun.
+    pub fn sun(&self) -> &Sun {
+        &self.sun
+    }
+
+    /// Obstacles by id.
+    pub fn obstacles(&self) -> &BTreeMap<u32, Obstacle> {
+        &self.obstacles
+    }
+
+    /// The voxel grid, if any.
+    pub fn voxels(&self) -> Option<&VoxelGrid> {
+        self.voxels.as_ref()
+    }
+
+    /// This world with `deltas` applied in order, all or none (SPEC §1). The version
+    /// grows by one per delta. On error, names the first failing delta.
+    pub fn apply(&self, deltas: &[MapDelta]) -> Result<World, MapDeltaError> {
+        delta::apply(self, deltas)
+    }
+
+    #[inline]
+    fn leaf_contact(&self, leaf: u32, seg: &Segment) -> Option<f64> {
+        match &self.leaves[leaf as usize] {
+            Leaf::Solid { shape, .. } => shape.first_contact(seg),
+            Leaf::Voxels => self.voxels.as_ref().and_then(|v| v.first_contact(seg)),
+        }
+    }
+
+    /// Whether any segment touches any obstacle or occupied voxel, each up to its own
+    /// [`SegmentEnd`]. Stops at the first contact; allocates nothing.
+    pub fn any_contact(&self, segments: &[Segment]) -> bool {
+        let Some((lo, hi)) = span(segments) else {
+            return false;
+        };
+        // Gather the leaves near the whole batch once (the batch is compact: a
+        // viewer's collision star, or the sight lines to one rover).
+        let mut near = [0u32; GATHER_CAPACITY];
+        let mut count = 0;
+        let mut overflow = false;
+        self.bvh.traverse(|node| {
+            let (mins, maxs) = (node.mins(), node.maxs());
+            if (0..3).any(|a| maxs[a] < lo[a] || mins[a] > hi[a]) {
+                return TraversalAction::Prune;
+            }
+            if let Some(leaf) = node.leaf_data() {
+                if count == GATHER_CAPACITY {
+                    overflow = true;
+                    return TraversalAction::EarlyExit;
+                }
+                near[count] = leaf;
+                count += 1;
+            }
+            TraversalAction::Continue
+        });
+        if overflow {
+            return segments.iter().any(|s| self.segment_contact(s));
+        }
+        segments
+            .iter()
+            .any(|s| near[..count].iter().any(|leaf| self.leaf_contact(*leaf, s).is_some_and(|t| s.reaches(t))))
+    }
+
+    /// Whether one segment touches anything, by a BVH walk with early exit.
+    fn segment_contact(&self, seg: &Segment) -> bool {
+        let mut hit = false;
+        self.bvh.traverse(|node| {
+            if first_contact_aabb(seg, &node.mins(), &node.maxs()).is_none() {
+                return TraversalAction::Prune;
+            }
+            if let Some(leaf) = node.leaf_data() {
+                if self.leaf_contact(leaf, seg).is_some_and(|t| seg.reaches(t)) {
+                    hit = true;
+                    return TraversalAction::EarlyExit;
+                }
+            }
+            TraversalAction::Continue
+        });
+        hit
+    }
+
+    /// Every obstacle the segment touches (up to its end), nearest first, with the
+    /// distance of first contact. For reports, not for the search.
+    pub fn contacts(&self, seg: &Segment) -> Vec<(Blocker, f64)> {
+        let mut found = Vec::new();
+        self.bvh.traverse(|node| {
+            if first_contact_aabb(seg, &node.mins(), &node.maxs()).is_none() {
+                return TraversalAction::Prune;
+            }
+            if let Some(leaf) = node.leaf_data() {
+                if let Some(t) = self.leaf_contact(leaf, seg).filter(|t| seg.reaches(*t)) {
+                    let blocker = match self.leaves[leaf as usize] {
+                        Leaf::Solid { id, .. } => Blocker::Obstacle(id),
+                        Leaf::Voxels => Blocker::Voxels,
+                    };
+                    found.push((blocker, t));
+                }
+            }
+            TraversalAction::Continue
+        });
+        found.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        found
+    }
+
+    /// The same check as [`World::any_contact`] by testing every obstacle: the
+    /// reference the BVH is tested against.
+    pub fn any_contact_by_scan(&self, segments: &[Segment]) -> bool {
+        segments.iter().any(|s| {
+            self.obstacles.values().any(|o| o.first_contact(s).is_some_and(|t| s.reaches(t)))
+                || self.voxels.as_ref().and_then(|v| v.first_contact(s)).is_some_and(|t| s.reaches(t))
+        })
+    }
+}
+
+fn padded((lo, hi): (Point3<f64>, Point3<f64>)) -> Aabb {
+    let pad = Vector3::repeat(LEAF_PAD);
+    Aabb::new(lo - pad, hi + pad)
+}
+
+/// The box spanned by the segments' end points, or `None` for no segments.
+fn span(segments: &[Segment]) -> Option<(Point3<f64>, Point3<f64>)> {
+    let first = segments.first()?;
+    let (mut lo, mut hi) = (first.origin, first.origin);
+    for s in segments {
+        let end = s.point_at(s.length.max(0.0));
+        for p in [s.origin, end] {
+            lo = lo.inf(&p);
+            hi = hi.sup(&p);
+        }
+    }
+    Some((lo, hi))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    fn random_world(rng: &mut Lcg, n: usize) -> World {
+        let obstacles = (0..n).map(|i| {
+            let o = if i % 3 == 2 {
+                let min = Point3::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0, rng.next() * 2.0);
+                Obstacle::Box(AxisBox { min, max: min + Vector3::new(0.2, 0.2, 0.2) + Vector3::repeat(rng.next() * 2.0) })
+            } else {
+                Obstacle::Cylinder(VerticalCylinder {
+                    center: Point2::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0),
+                    radius: 0.25 + rng.next(),
+                    height: 0.5 + rng.next() * 10.0,
+                })
+            };
+            (i as u32 * 3 + 1, o)
+        });
+        let obstacles: Vec<_> = obstacles.collect();
+        let cells: Vec<_> = (0..40)
+            .map(|_| [(rng.next() * 40.0) as i64, (rng.next() * 40.0) as i64, (rng.next() * 6.0) as i64])
+            .collect();
+        let voxels = VoxelGrid::new(0.5, Point3::new(-10.0, -10.0, 0.0), cells).unwrap();
+        World::new(0, Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), obstacles, Some(voxels))
+            .unwrap()
+    }
+
+    #[test]
+    fn bvh_agrees_with_scan() {
+        let mut rng = Lcg(11);
+        for n in [0, 1, 2, 25, 200] {
+            let world = random_world(&mut rng, n);
+            let mut hits = 0;
+            for i in 0..3000 {
+                let o = Point3::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0, rng.next() * 6.0);
+                let segs: Vec<Segment> = (0..(1 + i % 10))
+                    .map(|_| {
+                        let d = Vector3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5).normalize();
+                        Segment::closed(o, d, rng.next() * 8.0)
+                    })
+                    .collect();
+                let expected = world.any_contact_by_scan(&segs);
+                assert_eq!(world.any_contact(&segs), expected, "n = {n}, {segs:?}");
+                assert_eq!(segs.iter().any(|s| !world.contacts(s).is_empty()), expected);
+                hits += usize::from(expected);
+            }
+            if n >= 25 {
+                assert!(hits > 300, "n = {n}: only {hits} hits");
+            }
+        }
+    }
+
+    #[test]
+    fn open_end_excludes_the_target() {
+        let b = Obstacle::Box(AxisBox { min: Point3::new(1.0, -1.0, 0.0), max: Point3::new(2.0, 1.0, 1.0) });
+        let world = World::new(0, Bounds::new([-5.0, -5.0, 5.0, 5.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), [(1, b)], None)
+            .unwrap();
+        // Target on the box's face: the sight line ends there and is not occluded.
+        let to_face = Segment::sight_line(&Point3::new(0.0, 0.0, 0.5), &Point3::new(1.0, 0.0, 0.5), 1e-6).unwrap();
+        assert!(!world.any_contact(&[to_face]));
+        // Target behind the box: occluded.
+        let behind = Segment::sight_line(&Point3::new(0.0, 0.0, 0.5), &Point3::new(3.0, 0.0, 0.5), 1e-6).unwrap();
+        assert!(world.any_contact(&[behind]));
+        assert_eq!(world.contacts(&behind), vec![(Blocker::Obstacle(1), 1.0)]);
+    }
+
+    #[test]
+    fn sun_direction() {
+        let s = Sun::new(FRAC_PI_2, 0.3).unwrap().direction();
+        assert!((s - Vector3::z()).norm() < 1e-15);
+        assert!(Sun::new(1.6, 0.0).is_err());
+        assert!(Bounds::new([0.0, 0.0, 0.0, 1.0]).is_err());
+    }
+}
