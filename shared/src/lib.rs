@@ -19,6 +19,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod answer;
 pub mod limits;
 pub mod math;
 pub mod params;
@@ -31,6 +32,7 @@ pub mod world;
 
 /// The types most users need, in one `use`.
 pub mod prelude {
+    pub use crate::answer::{Algorithm, Answer, EvalStats, StopReason};
     pub use crate::math::{Cov2, Cov3, CovarianceError, Isometry3, Point3, UnitQuaternion, Vector3};
     pub use crate::params::{ModelKind, ParamError, Params};
     pub use crate::posterior::{Belief, Prior};

@@ -1,0 +1,259 @@
+//! The localization uncertainty prediction pipeline (LUPP): one candidate sensor
+//! state in, its feasibility and predicted posterior cost out.
+//!
+//! For a candidate x the pipeline decodes the sensor and viewer poses (SPEC §4),
+//! checks the workspace, collision and occlusion constraints in that order, stopping
+//! at the first failure (SPEC §5), predicts the measurement noise R with the SDSMM
+//! (SPEC §6) and scores `E = ln det Σ⁺` (SPEC §7). [`Lupp::evaluate`] is the
+//! search's hot path and allocates nothing; [`Lupp::predict`] reports everything
+//! about one candidate for answers and `dyfos eval`.
+//!
+//! ```
+//! use dyfos_service::lupp::{Evaluation, Lupp};
+//! use dyfos_shared::prelude::*;
+//!
+//! let scenario = Scenario::from_json(include_str!("../../tests/data/example.json")).unwrap();
+//! let model = NoiseModel::from_params(&scenario.params).unwrap();
+//! let lupp = Lupp::new(&scenario.world, &scenario.belief, &scenario.params, &model);
+//! match lupp.evaluate(&SensorState::new(2.0, 0.0, 0.0, 0.3)) {
+//!     Evaluation::Feasible { cost } => assert!(cost < scenario.belief.cov.matrix().determinant().ln()),
+//!     Evaluation::Rejected(why) => panic!("rejected by {why:?}"),
+//! }
+//! ```
+
+use dyfos_shared::answer::EvalStats;
+use dyfos_shared::math::{Cov2, Matrix3, Point3, Vector3};
+use dyfos_shared::params::Params;
+use dyfos_shared::posterior::{Belief, Prior};
+use dyfos_shared::sdsmm::{Features, NoiseModel, Sdsmm};
+use dyfos_shared::sensor::{SearchSpace, SensorPose, SensorRig, SensorState};
+use dyfos_shared::world::{Blocker, Segment, World};
+use std::f64::consts::FRAC_1_SQRT_2;
+
+/// The constraint that rejected a candidate (SPEC §5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Rejection {
+    /// Viewer outside the map bounds or the altitude limits.
+    Workspace,
+    /// A collision ray from the viewer touches an obstacle.
+    Collision,
+    /// A sight line from the sensor to a target point is blocked.
+    Occlusion,
+}
+
+impl Rejection {
+    /// The name used in reports: "workspace", "collision", "occlusion".
+    pub fn name(self) -> &'static str {
+        match self {
+            Rejection::Workspace => "workspace",
+            Rejection::Collision => "collision",
+            Rejection::Occlusion => "occlusion",
+        }
+    }
+}
+
+/// The verdict on one candidate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Evaluation {
+    /// Passed every constraint; `cost` is E = ln det Σ⁺.
+    Feasible {
+        /// E = ln det Σ⁺.
+        cost: f64,
+    },
+    /// Rejected by the first failing constraint.
+    Rejected(Rejection),
+}
+
+impl Evaluation {
+    /// The cost, if feasible.
+    #[inline]
+    pub fn cost(&self) -> Option<f64> {
+        match self {
+            Evaluation::Feasible { cost } => Some(*cost),
+            Evaluation::Rejected(_) => None,
+        }
+    }
+
+    /// Counts this verdict into `stats`.
+    #[inline]
+    pub fn count(&self, stats: &mut EvalStats) {
+        stats.total += 1;
+        match self {
+            Evaluation::Feasible { .. } => {}
+            Evaluation::Rejected(Rejection::Workspace) => stats.workspace += 1,
+            Evaluation::Rejected(Rejection::Collision) => stats.collision += 1,
+            Evaluation::Rejected(Rejection::Occlusion) => stats.occlusion += 1,
+        }
+    }
+}
+
+/// Everything about one candidate, for answers and reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prediction {
+    /// The candidate.
+    pub x: SensorState,
+    /// Its sensor and viewer poses.
+    pub pose: SensorPose,
+    /// The verdict.
+    pub evaluation: Evaluation,
+    /// What blocked it (empty when feasible or rejected by the workspace).
+    pub blockers: Vec<Blocker>,
+    /// SDSMM features (computed whether feasible or not).
+    pub features: Features,
+    /// Predicted measurement noise R.
+    pub r: Cov2,
+    /// Predicted posterior Σ⁺ by the full Kalman form.
+    pub posterior: Matrix3<f64>,
+}
+
+/// Occlusion segments are tested in batches of this many, on the stack.
+const SIGHT_BATCH: usize = 16;
+
+/// Unit directions of the 8 horizontal collision rays at yaw 0 (k·45°).
+const STAR: [(f64, f64); 8] = [
+    (1.0, 0.0),
+    (FRAC_1_SQRT_2, FRAC_1_SQRT_2),
+    (0.0, 1.0),
+    (-FRAC_1_SQRT_2, FRAC_1_SQRT_2),
+    (-1.0, 0.0),
+    (-FRAC_1_SQRT_2, -FRAC_1_SQRT_2),
+    (0.0, -1.0),
+    (FRAC_1_SQRT_2, -FRAC_1_SQRT_2),
+];
+
+/// The pipeline for one request: world, rendezvous belief, parameters and model,
+/// with everything that does not depend on the candidate precomputed.
+#[derive(Debug, Clone)]
+pub struct Lupp<'a> {
+    world: &'a World,
+    model: &'a NoiseModel,
+    params: Params,
+    prior: Prior,
+    rig: SensorRig,
+    space: SearchSpace,
+    sun: Vector3<f64>,
+    /// p_t, then the perimeter points (SPEC §2 order).
+    targets: Vec<Point3<f64>>,
+    reach: f64,
+}
+
+impl<'a> Lupp<'a> {
+    /// Prepares the pipeline. `params` must be valid (see [`Params::validate`]).
+    pub fn new(world: &'a World, belief: &Belief, params: &Params, model: &'a NoiseModel) -> Self {
+        debug_assert!(params.validate().is_ok());
+        let marker = belief.marker(params.marker_height);
+        let n = params.perimeter_points;
+        let theta = belief.mean.z;
+        let mut targets = Vec::with_capacity(n as usize + 1);
+        targets.push(marker);
+        targets.extend((0..n).map(|k| {
+            let a = theta + std::f64::consts::TAU * f64::from(k) / f64::from(n);
+            Point3::new(marker.x + params.rover_radius * a.cos(), marker.y + params.rover_radius * a.sin(), marker.z)
+        }));
+        Lupp {
+            world,
+            model,
+            params: *params,
+            prior: Prior::new(&belief.cov),
+            rig: SensorRig::new(params),
+            space: SearchSpace::new(params),
+            sun: world.sun().direction(),
+            targets,
+            reach: params.viewer_radius + params.safety_margin,
+        }
+    }
+
+    /// The candidate box.
+    pub fn space(&self) -> &SearchSpace {
+        &self.space
+    }
+
+    /// The world searched.
+    pub fn world(&self) -> &World {
+        self.world
+    }
+
+    /// The marker centre p_t.
+    pub fn marker(&self) -> Point3<f64> {
+        self.targets[0]
+    }
+
+    /// Feasibility and cost of `x`: the hot path, no allocation.
+    #[inline]
+    pub fn evaluate(&self, x: &SensorState) -> Evaluation {
+        let pose = self.rig.pose(&self.targets[0], x);
+        if let Some(why) = self.first_violation(&pose) {
+            return Evaluation::Rejected(why);
+        }
+        Evaluation::Feasible { cost: self.prior.cost(&self.noise(&pose)) }
+    }
+
+    #[inline]
+    fn noise(&self, pose: &SensorPose) -> Cov2 {
+        self.model.noise(&Features::new(&self.params, &self.sun, pose, &self.targets[0]))
+    }
+
+    #[inline]
+    fn first_violation(&self, pose: &SensorPose) -> Option<Rejection> {
+        let p_v = &pose.viewer_position;
+        if !(self.world.bounds().contains(p_v.x, p_v.y) && self.params.z_min <= p_v.z && p_v.z <= self.params.z_max) {
+            return Some(Rejection::Workspace);
+        }
+        if self.world.any_contact(&self.collision_rays(pose)) {
+            return Some(Rejection::Collision);
+        }
+        let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
+        for chunk in self.targets.chunks(SIGHT_BATCH) {
+            let mut n = 0;
+            for q in chunk {
+                if let Some(s) = Segment::sight_line(&pose.position, q, 1e-6) {
+                    batch[n] = s;
+                    n += 1;
+                }
+            }
+            if self.world.any_contact(&batch[..n]) {
+                return Some(Rejection::Occlusion);
+            }
+        }
+        None
+    }
+
+    /// The 10 collision segments of SPEC §5.2: 8 horizontal at ψ_v + k·45°, then +z, −z.
+    #[inline]
+    fn collision_rays(&self, pose: &SensorPose) -> [Segment; 10] {
+        let (s, c) = pose.viewer_yaw.sin_cos();
+        let p = pose.viewer_position;
+        let mut rays = [Segment::closed(p, Vector3::z(), self.reach); 10];
+        for (ray, (dx, dy)) in rays.iter_mut().zip(STAR) {
+            ray.dir = Vector3::new(c * dx - s * dy, s * dx + c * dy, 0.0);
+        }
+        rays[9].dir = -Vector3::z();
+        rays
+    }
+
+    /// Everything about `x`, listing every blocker of the first failing constraint.
+    pub fn predict(&self, x: &SensorState) -> Prediction {
+        let pose = self.rig.pose(&self.targets[0], x);
+        let evaluation = self.evaluate(x);
+        let blockers = match evaluation {
+            Evaluation::Rejected(Rejection::Collision) => self.blockers(&self.collision_rays(&pose)),
+            Evaluation::Rejected(Rejection::Occlusion) => {
+                let sights: Vec<Segment> =
+                    self.targets.iter().filter_map(|q| Segment::sight_line(&pose.position, q, 1e-6)).collect();
+                self.blockers(&sights)
+            }
+            _ => Vec::new(),
+        };
+        let features = Features::new(&self.params, &self.sun, &pose, &self.targets[0]);
+        let r = self.model.noise(&features);
+        Prediction { x: *x, pose, evaluation, blockers, features, r, posterior: self.prior.posterior(&r) }
+    }
+
+    fn blockers(&self, segments: &[Segment]) -> Vec<Blocker> {
+        let mut all: Vec<Blocker> = segments.iter().flat_map(|s| self.world.contacts(s)).map(|(b, _)| b).collect();
+        all.sort();
+        all.dedup();
+        all
+    }
+}
