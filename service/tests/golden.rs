@@ -60,7 +60,11 @@ fn candidates_match_the_golden_vectors() {
                 for r in 0..3 {
                     for k in 0..3 {
                         let want = c["posterior"][r][k].as_f64().unwrap();
-                        assert!(close(p.posterior[(r, k)], want, 1e-9), "{name} #{i} Σ⁺[{r}][{k}]: {} vs {want}", p.posterior[(r, k)]);
+                        assert!(
+                            close(p.posterior[(r, k)], want, 1e-9),
+                            "{name} #{i} Σ⁺[{r}][{k}]: {} vs {want}",
+                            p.posterior[(r, k)]
+                        );
                     }
                 }
             }
@@ -75,7 +79,8 @@ fn brute_matches_the_golden_optimum() {
     for (name, s, case) in cases() {
         let model = NoiseModel::from_params(&s.params).unwrap();
         let lupp = Lupp::new(&s.world, &s.belief, &s.params, &model);
-        let grid: Vec<usize> = case["brute"]["grid"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
+        let grid: Vec<usize> =
+            case["brute"]["grid"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
         let brute = Brute { grid: [grid[0], grid[1], grid[2], grid[3]] };
         let best = brute.search(&lupp, &SearchControl::seeded(0)).best.unwrap();
         let want = case["brute"]["cost"].as_f64().unwrap();

@@ -43,11 +43,7 @@ pub fn rot_y(pitch: f64) -> Matrix3<f64> {
 pub fn canonical_xyzw(q: &UnitQuaternion<f64>) -> [f64; 4] {
     let c = q.coords; // nalgebra stores (i, j, k, w)
     let mut v = [c.x, c.y, c.z, c.w];
-    let flip = if v[3] != 0.0 {
-        v[3] < 0.0
-    } else {
-        v[..3].iter().find(|x| **x != 0.0).is_some_and(|x| *x < 0.0)
-    };
+    let flip = if v[3] != 0.0 { v[3] < 0.0 } else { v[..3].iter().find(|x| **x != 0.0).is_some_and(|x| *x < 0.0) };
     if flip {
         v.iter_mut().for_each(|x| *x = -*x);
     }
@@ -196,17 +192,11 @@ mod tests {
             Cov3::from_rows(&[[0.2, 0.06, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]),
             Err(CovarianceError::NotSymmetric { row: 0, col: 1, .. })
         ));
-        assert_eq!(
-            Cov2::from_rows(&[[1.0, 2.0], [2.0, 1.0]]),
-            Err(CovarianceError::NotPositiveDefinite)
-        );
+        assert_eq!(Cov2::from_rows(&[[1.0, 2.0], [2.0, 1.0]]), Err(CovarianceError::NotPositiveDefinite));
         assert!(matches!(
             Cov2::from_rows(&[[f64::NAN, 0.0], [0.0, 1.0]]),
             Err(CovarianceError::NotFinite { row: 0, col: 0, .. })
         ));
-        assert_eq!(
-            Cov2::from_rows(&[[0.0, 0.0], [0.0, 1.0]]),
-            Err(CovarianceError::NotPositiveDefinite)
-        );
+        assert_eq!(Cov2::from_rows(&[[0.0, 0.0], [0.0, 1.0]]), Err(CovarianceError::NotPositiveDefinite));
     }
 }

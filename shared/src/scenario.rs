@@ -322,7 +322,8 @@ impl Scenario {
                     .map_err(|e| ScenarioError::invalid("voxels", e))?,
             ),
         };
-        let world = World::new(0, bounds, sun, obstacles, voxels).map_err(|e| ScenarioError::invalid("obstacles", e))?;
+        let world =
+            World::new(0, bounds, sun, obstacles, voxels).map_err(|e| ScenarioError::invalid("obstacles", e))?;
         let belief = Belief::new(raw.rover.mean, raw.rover.cov).map_err(|e| match e {
             crate::posterior::BeliefError::Mean { index, value } => {
                 ScenarioError::invalid(format!("rover.mean[{index}]"), format!("= {value} must be a finite number"))
@@ -332,9 +333,9 @@ impl Scenario {
             }
         })?;
         let params = raw.params.as_ref().map(RawParams::resolve).unwrap_or_default();
-        params.validate().map_err(|e| {
-            ScenarioError::invalid(format!("params.{}", e.field), format!("= {} {}", e.value, e.rule))
-        })?;
+        params
+            .validate()
+            .map_err(|e| ScenarioError::invalid(format!("params.{}", e.field), format!("= {} {}", e.value, e.rule)))?;
         Ok(Scenario { world, belief, params })
     }
 
@@ -351,7 +352,12 @@ impl Scenario {
                 .map(|(id, o)| match o {
                     Obstacle::Cylinder(c) => RawObstacle {
                         id: *id,
-                        cylinder: Some(RawCylinder { x: c.center.x, y: c.center.y, radius: c.radius, height: c.height }),
+                        cylinder: Some(RawCylinder {
+                            x: c.center.x,
+                            y: c.center.y,
+                            radius: c.radius,
+                            height: c.height,
+                        }),
                         box_: None,
                     },
                     Obstacle::Box(b) => RawObstacle {
@@ -439,7 +445,11 @@ mod tests {
             ("[0.05, 0.1, 0.0]", "[0.06, 0.1, 0.0]", "rover.cov"),
             ("[0.0, 0.0, 0.05]]", "[0.0, 0.0, -0.05]]", "rover.cov"),
             ("\"mean\": [0.0, 0.0, 0.3]", "\"mean\": [0.0, NaN, 0.3]", "rover.mean[1]"),
-            ("\"params\": {\"model\": \"paper\"}", "\"voxels\": {\"resolution\": 0, \"origin\": [0,0,0], \"occupied\": []}", "voxels"),
+            (
+                "\"params\": {\"model\": \"paper\"}",
+                "\"voxels\": {\"resolution\": 0, \"origin\": [0,0,0], \"occupied\": []}",
+                "voxels",
+            ),
         ];
         for (from, to, path) in cases {
             let err = with(from, to).unwrap_err();

@@ -92,6 +92,16 @@ fn converged(energies: &[f64], tol: f64, atol: f64) -> bool {
     var.sqrt() <= atol + tol * mean.abs()
 }
 
+/// Fisher–Yates on column `j` (written out: the stream must not depend on a
+/// library's shuffle, which may change between versions).
+fn shuffle_column(pop: &mut [Member], j: usize, rng: &mut ChaCha8Rng) {
+    for i in (1..pop.len()).rev() {
+        let k = rng.random_range(0..=i);
+        let (a, b) = (pop[i][j], pop[k][j]);
+        (pop[i][j], pop[k][j]) = (b, a);
+    }
+}
+
 /// Swaps the first member of lowest energy into index 0 (SciPy's promotion).
 fn promote_lowest(pop: &mut [Member], energies: &mut [f64]) {
     let mut best = 0;
@@ -113,14 +123,10 @@ impl Search for DifferentialEvolution {
 
         // Latin hypercube: one sample per stratum on each axis, strata shuffled per axis.
         let seg = 1.0 / np as f64;
-        let mut pop: Vec<Member> = (0..np).map(|i| std::array::from_fn(|_| seg * rng.random::<f64>() + seg * i as f64)).collect();
+        let mut pop: Vec<Member> =
+            (0..np).map(|i| std::array::from_fn(|_| seg * rng.random::<f64>() + seg * i as f64)).collect();
         for j in 0..DIMS {
-            for i in (1..np).rev() {
-                let k = rng.random_range(0..=i);
-                let tmp = pop[i][j];
-                pop[i][j] = pop[k][j];
-                pop[k][j] = tmp;
-            }
+            shuffle_column(&mut pop, j, &mut rng);
         }
         let mut energies = vec![f64::INFINITY; np];
         for i in 0..np {

@@ -156,18 +156,16 @@ impl<'l, 'a> Evaluator<'l, 'a> {
             self.stopped = Some(StopReason::Budget);
             return None;
         }
-        if self.stats.total.is_multiple_of(Self::CLOCK_EVERY)
-            && self.deadline.is_some_and(|d| Instant::now() >= d)
-        {
+        if self.stats.total.is_multiple_of(Self::CLOCK_EVERY) && self.deadline.is_some_and(|d| Instant::now() >= d) {
             self.stopped = Some(StopReason::Deadline);
             return None;
         }
         let e = self.lupp.evaluate(x);
         e.count(&mut self.stats);
-        if let Some(cost) = e.cost() {
-            if self.best.is_none_or(|b| cost < b.cost) {
-                self.best = Some(Found { x: *x, cost });
-            }
+        if let Some(cost) = e.cost()
+            && self.best.is_none_or(|b| cost < b.cost)
+        {
+            self.best = Some(Found { x: *x, cost });
         }
         Some(e)
     }

@@ -47,4 +47,3 @@ impl Search for CenterView {
         })
     }
 }
-

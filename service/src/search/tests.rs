@@ -28,8 +28,10 @@ fn every_algorithm_returns_a_feasible_pose_deterministically() {
             let best = out.best.unwrap_or_else(|| panic!("{algo:?} found nothing"));
             assert_eq!(lupp.evaluate(&best.x).cost(), Some(best.cost), "{algo:?} returned an infeasible pose");
             let again = algo.search(&lupp, &control);
-            assert_eq!(again.best.map(|b| (b.x.to_array().map(f64::to_bits), b.cost.to_bits())),
-                       out.best.map(|b| (b.x.to_array().map(f64::to_bits), b.cost.to_bits())));
+            assert_eq!(
+                again.best.map(|b| (b.x.to_array().map(f64::to_bits), b.cost.to_bits())),
+                out.best.map(|b| (b.x.to_array().map(f64::to_bits), b.cost.to_bits()))
+            );
             assert_eq!(again.stats, out.stats);
             let st = out.stats;
             assert!(st.workspace + st.collision + st.occlusion < st.total);
@@ -63,7 +65,8 @@ fn budget_caps_evaluations_and_keeps_answers_feasible() {
             assert_eq!(lupp.evaluate(&best.x).cost(), Some(best.cost));
         }
     }
-    let out = DifferentialEvolution::dyfos().search(&lupp, &SearchControl { budget: Some(100), ..SearchControl::seeded(3) });
+    let out =
+        DifferentialEvolution::dyfos().search(&lupp, &SearchControl { budget: Some(100), ..SearchControl::seeded(3) });
     assert_eq!(out.stop, StopReason::Budget);
 }
 
@@ -84,13 +87,16 @@ fn a_past_deadline_stops_at_once() {
 fn no_feasible_pose_when_the_rover_is_buried() {
     let mut s = example();
     // A box over the whole map from the ground up to 9 m: nothing can see or fly.
-    s.world = s.world.apply(&[MapDelta::UpsertObstacle {
-        id: 99,
-        obstacle: Obstacle::Box(dyfos_shared::world::AxisBox {
-            min: Point3::new(-10.0, -10.0, 0.0),
-            max: Point3::new(10.0, 10.0, 9.0),
-        }),
-    }]).unwrap();
+    s.world = s
+        .world
+        .apply(&[MapDelta::UpsertObstacle {
+            id: 99,
+            obstacle: Obstacle::Box(dyfos_shared::world::AxisBox {
+                min: Point3::new(-10.0, -10.0, 0.0),
+                max: Point3::new(10.0, 10.0, 9.0),
+            }),
+        }])
+        .unwrap();
     let model = NoiseModel::from_params(&s.params).unwrap();
     let lupp = Lupp::new(&s.world, &s.belief, &s.params, &model);
     for algo in algorithms() {

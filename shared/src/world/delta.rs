@@ -1,10 +1,10 @@
 //! Map deltas (SPEC §1): the only way a map changes.
 
+use super::voxels::CellIndex;
 use super::{Bounds, BoundsError, Obstacle, ObstacleError, Sun, SunError, VoxelError, VoxelGrid, World};
 use crate::limits::MAX_OBSTACLES;
 use crate::math::Point3;
 use std::collections::BTreeMap;
-use super::voxels::CellIndex;
 
 /// One change to a map.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -75,7 +75,9 @@ pub enum MapDeltaErrorKind {
     #[error(transparent)]
     Voxels(#[from] VoxelError),
     /// A voxel update's grid differs from the map's grid.
-    #[error("voxel grid mismatch: the map's grid has resolution {have_resolution} and origin {have_origin:?}, the delta says {resolution} and {origin:?}")]
+    #[error(
+        "voxel grid mismatch: the map's grid has resolution {have_resolution} and origin {have_origin:?}, the delta says {resolution} and {origin:?}"
+    )]
     VoxelGridMismatch {
         /// The map's resolution.
         have_resolution: f64,
@@ -187,8 +189,18 @@ mod tests {
                 MapDelta::UpsertObstacle { id: 2, obstacle: pole(2.0) },
                 MapDelta::UpsertObstacle { id: 1, obstacle: pole(3.0) },
                 MapDelta::RemoveObstacle { id: 2 },
-                MapDelta::SetVoxels { resolution: 0.5, origin: Point3::origin(), cells: vec![[0, 0, 0], [1, 0, 0]], occupied: true },
-                MapDelta::SetVoxels { resolution: 0.5, origin: Point3::origin(), cells: vec![[0, 0, 0]], occupied: false },
+                MapDelta::SetVoxels {
+                    resolution: 0.5,
+                    origin: Point3::origin(),
+                    cells: vec![[0, 0, 0], [1, 0, 0]],
+                    occupied: true,
+                },
+                MapDelta::SetVoxels {
+                    resolution: 0.5,
+                    origin: Point3::origin(),
+                    cells: vec![[0, 0, 0]],
+                    occupied: false,
+                },
             ])
             .unwrap();
         assert_eq!(w.version(), 6);
@@ -204,20 +216,19 @@ mod tests {
     fn a_bad_delta_rejects_the_whole_batch() {
         let w = base().apply(&[MapDelta::UpsertObstacle { id: 1, obstacle: pole(1.0) }]).unwrap();
         let bad_box = Obstacle::Box(AxisBox { min: Point3::new(0.0, 0.0, 0.0), max: Point3::new(1.0, f64::NAN, 1.0) });
-        let cases: Vec<(MapDelta, fn(&MapDeltaErrorKind) -> bool)> = vec![
+        type Expect = fn(&MapDeltaErrorKind) -> bool;
+        let cases: Vec<(MapDelta, Expect)> = vec![
             (MapDelta::RemoveObstacle { id: 9 }, |k| matches!(k, MapDeltaErrorKind::UnknownObstacle { id: 9 })),
             (MapDelta::UpsertObstacle { id: 5, obstacle: bad_box }, |k| {
                 matches!(k, MapDeltaErrorKind::InvalidObstacle { id: 5, .. })
             }),
             (MapDelta::SetSun(Sun { elevation: 2.0, azimuth: 0.0 }), |k| matches!(k, MapDeltaErrorKind::Sun(_))),
-            (
-                MapDelta::SetBounds(Bounds { min: Point2::new(1.0, 0.0), max: Point2::new(0.0, 1.0) }),
-                |k| matches!(k, MapDeltaErrorKind::Bounds(_)),
-            ),
-            (
-                MapDelta::SetVoxels { resolution: -1.0, origin: Point3::origin(), cells: vec![], occupied: true },
-                |k| matches!(k, MapDeltaErrorKind::Voxels(_)),
-            ),
+            (MapDelta::SetBounds(Bounds { min: Point2::new(1.0, 0.0), max: Point2::new(0.0, 1.0) }), |k| {
+                matches!(k, MapDeltaErrorKind::Bounds(_))
+            }),
+            (MapDelta::SetVoxels { resolution: -1.0, origin: Point3::origin(), cells: vec![], occupied: true }, |k| {
+                matches!(k, MapDeltaErrorKind::Voxels(_))
+            }),
         ];
         for (delta, expected) in cases {
             let batch = [MapDelta::UpsertObstacle { id: 2, obstacle: pole(2.0) }, delta];
@@ -226,7 +237,12 @@ mod tests {
             assert!(expected(&err.kind), "{err}");
         }
         let with_grid = w
-            .apply(&[MapDelta::SetVoxels { resolution: 0.5, origin: Point3::origin(), cells: vec![[0, 0, 0]], occupied: true }])
+            .apply(&[MapDelta::SetVoxels {
+                resolution: 0.5,
+                origin: Point3::origin(),
+                cells: vec![[0, 0, 0]],
+                occupied: true,
+            }])
             .unwrap();
         let err = with_grid
             .apply(&[MapDelta::SetVoxels { resolution: 0.25, origin: Point3::origin(), cells: vec![], occupied: true }])

@@ -202,7 +202,8 @@ impl World {
         obstacles: BTreeMap<u32, Obstacle>,
         voxels: Option<VoxelGrid>,
     ) -> Self {
-        let mut leaves: Vec<Leaf> = obstacles.iter().map(|(id, shape)| Leaf::Solid { id: *id, shape: *shape }).collect();
+        let mut leaves: Vec<Leaf> =
+            obstacles.iter().map(|(id, shape)| Leaf::Solid { id: *id, shape: *shape }).collect();
         let mut boxes: Vec<Aabb> = obstacles.values().map(|o| padded(o.aabb())).collect();
         if let Some(aabb) = voxels.as_ref().and_then(VoxelGrid::aabb) {
             leaves.push(Leaf::Voxels);
@@ -292,11 +293,11 @@ impl World {
             if first_contact_aabb(seg, &node.mins(), &node.maxs()).is_none() {
                 return TraversalAction::Prune;
             }
-            if let Some(leaf) = node.leaf_data() {
-                if self.leaf_contact(leaf, seg).is_some_and(|t| seg.reaches(t)) {
-                    hit = true;
-                    return TraversalAction::EarlyExit;
-                }
+            if let Some(leaf) = node.leaf_data()
+                && self.leaf_contact(leaf, seg).is_some_and(|t| seg.reaches(t))
+            {
+                hit = true;
+                return TraversalAction::EarlyExit;
             }
             TraversalAction::Continue
         });
@@ -311,14 +312,14 @@ impl World {
             if first_contact_aabb(seg, &node.mins(), &node.maxs()).is_none() {
                 return TraversalAction::Prune;
             }
-            if let Some(leaf) = node.leaf_data() {
-                if let Some(t) = self.leaf_contact(leaf, seg).filter(|t| seg.reaches(*t)) {
-                    let blocker = match self.leaves[leaf as usize] {
-                        Leaf::Solid { id, .. } => Blocker::Obstacle(id),
-                        Leaf::Voxels => Blocker::Voxels,
-                    };
-                    found.push((blocker, t));
-                }
+            if let Some(leaf) = node.leaf_data()
+                && let Some(t) = self.leaf_contact(leaf, seg).filter(|t| seg.reaches(*t))
+            {
+                let blocker = match self.leaves[leaf as usize] {
+                    Leaf::Solid { id, .. } => Blocker::Obstacle(id),
+                    Leaf::Voxels => Blocker::Voxels,
+                };
+                found.push((blocker, t));
             }
             TraversalAction::Continue
         });
@@ -371,7 +372,10 @@ mod tests {
         let obstacles = (0..n).map(|i| {
             let o = if i % 3 == 2 {
                 let min = Point3::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0, rng.next() * 2.0);
-                Obstacle::Box(AxisBox { min, max: min + Vector3::new(0.2, 0.2, 0.2) + Vector3::repeat(rng.next() * 2.0) })
+                Obstacle::Box(AxisBox {
+                    min,
+                    max: min + Vector3::new(0.2, 0.2, 0.2) + Vector3::repeat(rng.next() * 2.0),
+                })
             } else {
                 Obstacle::Cylinder(VerticalCylinder {
                     center: Point2::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0),
@@ -386,8 +390,14 @@ mod tests {
             .map(|_| [(rng.next() * 40.0) as i64, (rng.next() * 40.0) as i64, (rng.next() * 6.0) as i64])
             .collect();
         let voxels = VoxelGrid::new(0.5, Point3::new(-10.0, -10.0, 0.0), cells).unwrap();
-        World::new(0, Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), obstacles, Some(voxels))
-            .unwrap()
+        World::new(
+            0,
+            Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(),
+            Sun::new(0.5, 0.0).unwrap(),
+            obstacles,
+            Some(voxels),
+        )
+        .unwrap()
     }
 
     #[test]
@@ -418,8 +428,9 @@ mod tests {
     #[test]
     fn open_end_excludes_the_target() {
         let b = Obstacle::Box(AxisBox { min: Point3::new(1.0, -1.0, 0.0), max: Point3::new(2.0, 1.0, 1.0) });
-        let world = World::new(0, Bounds::new([-5.0, -5.0, 5.0, 5.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), [(1, b)], None)
-            .unwrap();
+        let world =
+            World::new(0, Bounds::new([-5.0, -5.0, 5.0, 5.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), [(1, b)], None)
+                .unwrap();
         // Target on the box's face: the sight line ends there and is not occluded.
         let to_face = Segment::sight_line(&Point3::new(0.0, 0.0, 0.5), &Point3::new(1.0, 0.0, 0.5), 1e-6).unwrap();
         assert!(!world.any_contact(&[to_face]));

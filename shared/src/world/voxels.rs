@@ -239,7 +239,7 @@ impl VoxelGrid {
         }
         loop {
             let t_next = t_max[0].min(t_max[1]).min(t_max[2]);
-            if !(t_next <= t1) {
+            if t_next.is_nan() || t_next > t1 {
                 return None;
             }
             // Every axis whose boundary is crossed at t_next steps together; the cells

@@ -1,0 +1,68 @@
+//! `dyfos`: the DyFOS command line. A thin layer over `dyfos-service`: parse the
+//! flags, run one library call, print JSON, map errors to exit codes.
+//!
+//! Exit codes: 0 success, 2 invalid input (the message names the field), 3 no
+//! feasible pose, 1 anything else.
+
+mod offline;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Where to put a viewer's camera to localize a perception-denied rover.
+#[derive(Debug, Parser)]
+#[command(name = "dyfos", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Search a scenario file offline and print the answer as JSON.
+    Solve(offline::SolveArgs),
+    /// Evaluate one candidate x = (ρ, ψ, φ, ψ_v) of a scenario and print the verdict as JSON.
+    Eval(offline::EvalArgs),
+}
+
+/// An error with the exit code it deserves.
+#[derive(Debug)]
+pub struct Failure {
+    code: u8,
+    error: anyhow::Error,
+}
+
+impl Failure {
+    /// Bad input: exit 2.
+    pub fn invalid(error: impl Into<anyhow::Error>) -> Self {
+        Failure { code: 2, error: error.into() }
+    }
+
+    /// No feasible pose: exit 3.
+    pub fn infeasible(error: impl Into<anyhow::Error>) -> Self {
+        Failure { code: 3, error: error.into() }
+    }
+}
+
+impl<E: Into<anyhow::Error>> From<E> for Failure {
+    fn from(error: E) -> Self {
+        Failure { code: 1, error: error.into() }
+    }
+}
+
+fn run(cli: Cli) -> Result<(), Failure> {
+    match cli.command {
+        Command::Solve(args) => offline::solve(&args),
+        Command::Eval(args) => offline::eval(&args),
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(f) => {
+            eprintln!("dyfos: {:#}", f.error);
+            ExitCode::from(f.code)
+        }
+    }
+}
