@@ -50,6 +50,18 @@ impl<E: Into<anyhow::Error>> From<E> for Failure {
     }
 }
 
+/// Prints a JSON object with one top-level field per line and each value compact,
+/// which reads well in a terminal and still parses as JSON.
+pub fn print_json(value: &serde_json::Value) {
+    let Some(object) = value.as_object() else {
+        println!("{value}");
+        return;
+    };
+    let fields: Vec<String> =
+        object.iter().map(|(k, v)| format!("  {}: {v}", serde_json::Value::from(k.as_str()))).collect();
+    println!("{{\n{}\n}}", fields.join(",\n"));
+}
+
 fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Solve(args) => offline::solve(&args),

@@ -69,7 +69,7 @@ pub fn solve(args: &SolveArgs) -> Result<(), Failure> {
     }
     let answer = solve_scenario(&scenario.world, &scenario.belief, &scenario.params, &model, args.algo, &control)
         .map_err(|e: SearchError| Failure::infeasible(e))?;
-    println!("{}", serde_json::to_string_pretty(&answer.to_json())?);
+    crate::print_json(&answer.to_json());
     Ok(())
 }
 
@@ -112,6 +112,6 @@ pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
         "posterior": rows3(&p.posterior),
         "cost": cost,
     });
-    println!("{}", serde_json::to_string_pretty(&out)?);
+    crate::print_json(&out);
     Ok(())
 }

@@ -1,0 +1,129 @@
+//! The `dyfos` command line: output shape and exit codes (0 ok, 2 invalid input,
+//! 3 no feasible pose).
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn dyfos(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dyfos")).args(args).output().expect("dyfos runs")
+}
+
+fn example() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/example.json")
+}
+
+/// Writes `json` to a fresh file in the target dir and returns its path.
+fn scenario_file(name: &str, json: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cli");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, json).unwrap();
+    path
+}
+
+fn edited(from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(example()).unwrap();
+    assert!(text.contains(from), "edit `{from}` does not apply");
+    text.replacen(from, to, 1)
+}
+
+#[test]
+fn solve_prints_every_field_of_an_answer() {
+    let out = dyfos(&["solve", example().to_str().unwrap(), "--algo", "dyfos", "--seed", "5"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "algorithm",
+        "x",
+        "cost",
+        "sensor_position",
+        "sensor_quaternion",
+        "viewer_position",
+        "R",
+        "posterior",
+        "evaluations",
+        "micros",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(v["algorithm"], "dyfos");
+    assert_eq!(v["x"].as_array().unwrap().len(), 4);
+    let ev = &v["evaluations"];
+    let total = ev["total"].as_u64().unwrap();
+    assert!(
+        ev["workspace"].as_u64().unwrap() + ev["collision"].as_u64().unwrap() + ev["occlusion"].as_u64().unwrap()
+            < total
+    );
+    let q: Vec<f64> = v["sensor_quaternion"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    assert!((q.iter().map(|x| x * x).sum::<f64>() - 1.0).abs() < 1e-12 && q[3] >= 0.0);
+
+    // Same seed, same answer (every field but the time).
+    let again: Value = serde_json::from_slice(
+        &dyfos(&["solve", example().to_str().unwrap(), "--algo", "dyfos", "--seed", "5"]).stdout,
+    )
+    .unwrap();
+    for key in ["x", "cost", "sensor_position", "R", "posterior", "evaluations"] {
+        assert_eq!(again[key], v[key], "{key}");
+    }
+}
+
+#[test]
+fn eval_reports_the_verdict_and_its_reason() {
+    let ok = dyfos(&["eval", example().to_str().unwrap(), "--x", "2", "0", "0", "0.3"]);
+    assert!(ok.status.success());
+    let v: Value = serde_json::from_slice(&ok.stdout).unwrap();
+    assert_eq!(v["feasible"], true);
+    assert!(v["reason"].is_null() && v["cost"].is_f64());
+
+    // Facing the pole at (2, 1) from the far side: the marker is hidden behind it.
+    let hidden = dyfos(&["eval", example().to_str().unwrap(), "--x", "6", "0", "0", "-2.677945"]);
+    let v: Value = serde_json::from_slice(&hidden.stdout).unwrap();
+    assert_eq!(v["feasible"], false);
+    assert_eq!(v["reason"], "occlusion", "{v}");
+    assert_eq!(v["blockers"], serde_json::json!([1]));
+    assert!(v["cost"].is_null());
+
+    // Far outside the map.
+    let outside = edited("[-10.0, -10.0, 10.0, 10.0]", "[-1.0, -1.0, 1.0, 1.0]");
+    let path = scenario_file("small_bounds.json", &outside);
+    let v: Value =
+        serde_json::from_slice(&dyfos(&["eval", path.to_str().unwrap(), "--x", "6", "0", "0", "0"]).stdout).unwrap();
+    assert_eq!(v["reason"], "workspace");
+}
+
+#[test]
+fn invalid_scenarios_exit_2_naming_the_field() {
+    let cases = [
+        ("\"model\": \"paper\"", "\"rho_min\": 7", "params.rho_min = 7 must be < rho_max = 6"),
+        ("\"model\": \"paper\"", "\"kapa\": 1", "did you mean `kappa`?"),
+        ("[0.05, 0.1, 0.0]", "[0.06, 0.1, 0.0]", "rover.cov"),
+        ("\"radius\": 0.5", "\"radius\": 0", "obstacles[0].cylinder"),
+        ("{\"id\": 2,", "{\"id\": 1,", "duplicate obstacle id 1"),
+        ("\"bounds\"", "\"bounds\": [0, 0, 1, 1], \"oops\"", "unknown field `oops`"),
+    ];
+    for (i, (from, to, needle)) in cases.into_iter().enumerate() {
+        let path = scenario_file(&format!("bad_{i}.json"), &edited(from, to));
+        let out = dyfos(&["solve", path.to_str().unwrap()]);
+        assert_eq!(out.status.code(), Some(2), "{to}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "`{to}`: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+        assert!(out.stdout.is_empty());
+    }
+    let out = dyfos(&["solve", "/nonexistent/scenario.json"]);
+    assert_eq!(out.status.code(), Some(2));
+    let path = scenario_file("not_json.json", "{\"bounds\": [");
+    assert_eq!(dyfos(&["solve", path.to_str().unwrap()]).status.code(), Some(2));
+}
+
+#[test]
+fn no_feasible_pose_exits_3() {
+    // A slab over the whole map up to 9 m: nowhere to fly, nothing to see.
+    let buried =
+        edited("{\"id\": 2,", "{\"id\": 3, \"box\": {\"min\": [-10, -10, 0], \"max\": [10, 10, 9]}}, {\"id\": 2,");
+    let path = scenario_file("buried.json", &buried);
+    let out = dyfos(&["solve", path.to_str().unwrap(), "--algo", "random", "--budget", "2000"]);
+    assert_eq!(out.status.code(), Some(3));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no_feasible_pose"));
+}
