@@ -25,3 +25,29 @@ pub const MAX_SAMPLING_TRIES: u64 = 100_000;
 /// Largest |coordinate| accepted anywhere in a map, in metres. Keeps every derived
 /// quantity (squares, bounding boxes) far from overflow.
 pub const MAX_COORDINATE: f64 = 1.0e6;
+
+/// Most [`crate::wire::WireDelta`] records in one message (a map request, one chunk
+/// of an upload or snapshot). 4096 records of 88 bytes: 352 KiB.
+pub const MAX_DELTAS_PER_MESSAGE: usize = 4096;
+
+/// Most delta records carried inline by one rendezvous request.
+pub const MAX_INLINE_DELTAS: usize = 1024;
+
+/// Most chunks of one map upload: enough for [`MAX_OBSTACLES`] obstacles plus
+/// [`MAX_OCCUPIED_VOXELS`] cells at [`MAX_DELTAS_PER_MESSAGE`] records a chunk.
+pub const MAX_UPLOAD_CHUNKS: u32 = 1100;
+
+/// Most maps one daemon holds.
+pub const MAX_MAPS: usize = 256;
+
+/// Most map uploads in progress at once (each buffers its chunks until complete).
+pub const MAX_PENDING_UPLOADS: usize = 8;
+
+/// Longest request deadline accepted, µs (one hour).
+pub const MAX_DEADLINE_MICROS: u64 = 3_600_000_000;
+
+/// Longest `--prefix` for the daemon's service names, in bytes.
+pub const MAX_PREFIX_LEN: usize = 200;
+
+/// Bytes of the human-readable detail carried by an error reply.
+pub const DETAIL_LEN: usize = 240;

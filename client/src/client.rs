@@ -1,0 +1,534 @@
+//! [`Client`]: the connection to one `dyfosd` and its typed requests.
+
+use crate::Ipc;
+use crate::error::{CallError, ClientOpenError, MapRequestError, RendezvousError, StatsRequestError};
+use dyfos_shared::answer::Answer;
+use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS};
+use dyfos_shared::wire::map::{
+    MapId, MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, decode_deltas, world_chunks,
+};
+use dyfos_shared::wire::rendezvous::{
+    Mode, RendezvousCheck, RendezvousReply, RendezvousRequest, RendezvousRequestHeader,
+};
+use dyfos_shared::wire::stats::{DaemonStats, StatsReply, StatsRequest};
+use dyfos_shared::wire::{DEFAULT_PREFIX, Rejection, ServiceNames, Status, split_u128};
+use dyfos_shared::world::{Bounds, MapDelta, Sun, World};
+use iceoryx2::port::client::Client as ClientPort;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::request_response::RequestResponseOpenError;
+use std::time::{Duration, Instant};
+
+type RendezvousPort = ClientPort<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
+type MapPort = ClientPort<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapReplyHeader>;
+type StatsPort = ClientPort<Ipc, StatsRequest, (), StatsReply, ()>;
+
+/// How to reach the daemon.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ClientConfig {
+    /// Service-name prefix the daemon serves (its `--prefix`); default `dyfos/`.
+    pub prefix: String,
+    /// How long [`Client::connect`] (and a reconnect) waits for the daemon to appear.
+    pub connect_timeout: Duration,
+    /// How long to busy-poll for a reply before sleeping on the reply event. Short
+    /// replies then arrive without a wake-up (see `bench/RESULTS.md`).
+    pub spin: Duration,
+    /// iceoryx2 file prefix (its `global.prefix`, default `iox2_`): processes see each
+    /// other only within one domain. `None` keeps iceoryx2's default. The daemon's
+    /// `--domain`.
+    pub domain: Option<String>,
+}
+
+impl Default for ClientConfig {
+    fn default() -> Self {
+        ClientConfig {
+            prefix: DEFAULT_PREFIX.to_string(),
+            connect_timeout: Duration::from_secs(2),
+            spin: Duration::from_micros(200),
+            domain: None,
+        }
+    }
+}
+
+/// The iceoryx2 configuration of a domain (`None`: iceoryx2's default).
+pub(crate) fn iceoryx_config(domain: Option<&str>) -> Result<iceoryx2::config::Config, ClientOpenError> {
+    let mut config = iceoryx2::config::Config::default();
+    if let Some(d) = domain {
+        let valid = !d.is_empty() && d.len() <= 32 && d.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_');
+        config.global.prefix = match FileName::new(d.as_bytes()) {
+            Ok(name) if valid => name,
+            _ => return Err(ClientOpenError::InvalidDomain(d.to_string())),
+        };
+    }
+    Ok(config)
+}
+
+fn ipc(e: impl std::fmt::Debug) -> CallError {
+    CallError::Ipc(format!("{e:?}"))
+}
+
+fn open_ipc(e: impl std::fmt::Debug) -> ClientOpenError {
+    ClientOpenError::Ipc(format!("{e:?}"))
+}
+
+/// The ports of one connection. Dropping it closes them.
+struct Connection {
+    node: Node<Ipc>,
+    rendezvous: RendezvousPort,
+    map: MapPort,
+    stats: StatsPort,
+    wake: Notifier<Ipc>,
+    reply: Listener<Ipc>,
+    reply_to: [u64; 2],
+}
+
+enum Opened {
+    Ready(Box<Connection>),
+    /// The services are not there (yet): no daemon.
+    Missing,
+}
+
+impl Connection {
+    fn open(config: &ClientConfig, names: &ServiceNames) -> Result<Opened, ClientOpenError> {
+        let iox = iceoryx_config(config.domain.as_deref())?;
+        // No signal handler: Ctrl-C belongs to the application, not to this library.
+        let node = NodeBuilder::new()
+            .config(&iox)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<Ipc>()
+            .map_err(open_ipc)?;
+        let service_name = |s: &str| ServiceName::new(s).map_err(open_ipc);
+        let incompatible = |service: &str, e: RequestResponseOpenError| match e {
+            RequestResponseOpenError::DoesNotExist => None,
+            RequestResponseOpenError::IncompatibleRequestOrResponseType
+            | RequestResponseOpenError::IncompatibleMessagingPattern
+            | RequestResponseOpenError::IncompatibleAttributes => {
+                Some(ClientOpenError::Incompatible { service: service.to_string(), reason: format!("{e:?}") })
+            }
+            other => Some(ClientOpenError::Ipc(format!("{service}: {other:?}"))),
+        };
+        macro_rules! open_rr {
+            ($name:expr, $build:expr) => {
+                match $build.open() {
+                    Ok(s) => s,
+                    Err(e) => match incompatible($name, e) {
+                        None => return Ok(Opened::Missing),
+                        Some(err) => return Err(err),
+                    },
+                }
+            };
+        }
+        let rendezvous = open_rr!(
+            &names.rendezvous,
+            node.service_builder(&service_name(&names.rendezvous)?)
+                .request_response::<[WireDelta], RendezvousReply>()
+                .request_user_header::<RendezvousRequestHeader>()
+        );
+        let map = open_rr!(
+            &names.map,
+            node.service_builder(&service_name(&names.map)?)
+                .request_response::<[WireDelta], [WireDelta]>()
+                .request_user_header::<MapRequestHeader>()
+                .response_user_header::<MapReplyHeader>()
+        );
+        let stats = open_rr!(
+            &names.stats,
+            node.service_builder(&service_name(&names.stats)?).request_response::<StatsRequest, StatsReply>()
+        );
+        let (Ok(wake), Ok(reply)) = (
+            node.service_builder(&service_name(&names.wake)?).event().open(),
+            node.service_builder(&service_name(&names.reply)?).event().open(),
+        ) else {
+            return Ok(Opened::Missing);
+        };
+        use iceoryx2::service::port_factory::PortFactory as _;
+        if rendezvous.dynamic_config().number_of_servers() == 0 {
+            return Ok(Opened::Missing);
+        }
+        let reply_listener = reply.listener_builder().create().map_err(open_ipc)?;
+        let reply_to = split_u128(reply_listener.id().value());
+        Ok(Opened::Ready(Box::new(Connection {
+            rendezvous: rendezvous
+                .client_builder()
+                .initial_max_slice_len(64)
+                .allocation_strategy(AllocationStrategy::PowerOfTwo)
+                .create()
+                .map_err(open_ipc)?,
+            map: map
+                .client_builder()
+                .initial_max_slice_len(1024)
+                .allocation_strategy(AllocationStrategy::PowerOfTwo)
+                .create()
+                .map_err(open_ipc)?,
+            stats: stats.client_builder().create().map_err(open_ipc)?,
+            wake: wake.notifier_builder().create().map_err(open_ipc)?,
+            reply: reply_listener,
+            reply_to,
+            node,
+        })))
+    }
+
+    /// Waits for `receive` to yield a reply: busy-polls for `spin`, then sleeps on
+    /// the reply event. Notices a daemon that died (its ports go away when the dead
+    /// node is cleaned up, which this loop triggers) and the timeout.
+    fn await_reply<T>(
+        &self,
+        spin: Duration,
+        timeout: Duration,
+        mut receive: impl FnMut() -> Result<Option<T>, CallError>,
+        is_connected: impl Fn() -> bool,
+    ) -> Result<T, CallError> {
+        let start = Instant::now();
+        self.wake.notify().map_err(ipc)?;
+        let mut last_cleanup = start;
+        loop {
+            if let Some(v) = receive()? {
+                return Ok(v);
+            }
+            let now = Instant::now();
+            let elapsed = now - start;
+            if elapsed >= timeout {
+                return Err(CallError::Timeout(timeout));
+            }
+            if elapsed < spin {
+                std::hint::spin_loop();
+                continue;
+            }
+            if !is_connected() {
+                // The reply may have landed just before the server let go.
+                return receive()?.ok_or(CallError::DaemonGone);
+            }
+            if now - last_cleanup >= Duration::from_millis(200) {
+                self.node.try_cleanup_dead_nodes();
+                last_cleanup = now;
+            }
+            let nap = (timeout - elapsed).min(Duration::from_millis(100));
+            self.reply.timed_wait(|_| {}, nap).map_err(ipc)?;
+        }
+    }
+}
+
+/// A connection to `dyfosd`. One request at a time (`&mut self`); open one client
+/// per thread that queries concurrently. `Send`, so it can move to a worker thread.
+pub struct Client {
+    config: ClientConfig,
+    names: ServiceNames,
+    conn: Option<Box<Connection>>,
+    next_id: u64,
+}
+
+impl std::fmt::Debug for Client {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Client").field("prefix", &self.names.prefix).field("connected", &self.conn.is_some()).finish()
+    }
+}
+
+impl Client {
+    /// Connects to the daemon serving `config.prefix`, waiting up to
+    /// `config.connect_timeout` for it to appear.
+    pub fn connect(config: &ClientConfig) -> Result<Client, ClientOpenError> {
+        let names = ServiceNames::new(&config.prefix)?;
+        let mut client = Client { config: config.clone(), names, conn: None, next_id: 1 };
+        client.ensure_connected(config.connect_timeout)?;
+        Ok(client)
+    }
+
+    /// The configuration this client was made with.
+    pub fn config(&self) -> &ClientConfig {
+        &self.config
+    }
+
+    fn ensure_connected(&mut self, limit: Duration) -> Result<(), ClientOpenError> {
+        if self.conn.is_none() {
+            let start = Instant::now();
+            let waited = limit.min(self.config.connect_timeout);
+            loop {
+                match Connection::open(&self.config, &self.names)? {
+                    Opened::Ready(c) => {
+                        self.conn = Some(c);
+                        break;
+                    }
+                    Opened::Missing if start.elapsed() < waited => std::thread::sleep(Duration::from_millis(10)),
+                    Opened::Missing => {
+                        return Err(ClientOpenError::NoDaemon {
+                            service: self.names.rendezvous.clone(),
+                            prefix: self.names.prefix.clone(),
+                            waited,
+                        });
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs `call`; a daemon that went away drops the connection, so the next call
+    /// reconnects.
+    fn with_connection<T>(
+        &mut self,
+        timeout: Duration,
+        call: impl FnOnce(&Connection, u64, &ClientConfig, &ServiceNames) -> Result<T, CallError>,
+    ) -> Result<T, CallError> {
+        let id = self.next_id;
+        self.next_id += 1;
+        let result = match self.ensure_connected(timeout) {
+            Ok(()) => call(self.conn.as_deref().expect("connected above"), id, &self.config, &self.names),
+            Err(e) => Err(CallError::Connect(e)),
+        };
+        if matches!(result, Err(CallError::DaemonGone | CallError::NoDaemon { .. } | CallError::Ipc(_))) {
+            self.conn = None;
+        }
+        result
+    }
+
+    fn rendezvous_call(
+        &mut self,
+        request: &RendezvousRequest,
+        mode: Mode,
+        timeout: Duration,
+    ) -> Result<RendezvousReply, CallError> {
+        let records = request.records();
+        if records.len() > MAX_INLINE_DELTAS {
+            return Err(CallError::Local(Rejection::new(
+                Status::OverCapacity,
+                format!(
+                    "{} inline delta records exceed the limit of {MAX_INLINE_DELTAS}; apply them with Client::apply first",
+                    records.len()
+                ),
+            )));
+        }
+        self.with_connection(timeout, |conn, id, config, names| {
+            let header = request.header(mode, id, conn.reply_to);
+            let mut loan = conn.rendezvous.loan_slice_uninit(records.len()).map_err(ipc)?;
+            *loan.user_header_mut() = header;
+            let pending = loan.write_from_slice(&records).send().map_err(ipc)?;
+            if pending.number_of_server_connections() == 0 {
+                return Err(CallError::NoDaemon { service: names.rendezvous.clone(), prefix: names.prefix.clone() });
+            }
+            conn.await_reply(
+                config.spin,
+                timeout,
+                || Ok(pending.receive().map_err(ipc)?.map(|r| *r.payload()).filter(|r| r.request_id == id)),
+                || pending.is_connected(),
+            )
+        })
+    }
+
+    /// Asks the daemon for the optimal sensor pose. Waits at most `timeout`; give the
+    /// request a `deadline` shorter than that to get the best pose found in time.
+    pub fn rendezvous(&mut self, request: &RendezvousRequest, timeout: Duration) -> Result<Answer, RendezvousError> {
+        let reply = self.rendezvous_call(request, Mode::Solve, timeout)?;
+        reply.decode_answer().map_err(RendezvousError::Rejected)
+    }
+
+    /// Sends `request` in check mode: the daemon validates everything (map id and
+    /// version, belief, parameters, inline deltas on a copy of the map) and answers
+    /// at once, without searching or changing the map. The round-trip floor.
+    pub fn check(
+        &mut self,
+        request: &RendezvousRequest,
+        timeout: Duration,
+    ) -> Result<RendezvousCheck, RendezvousError> {
+        let reply = self.rendezvous_call(request, Mode::Check, timeout)?;
+        reply.decode_check().map_err(RendezvousError::Rejected)
+    }
+
+    /// One map request and its reply header and records.
+    fn map_call(
+        &mut self,
+        request: &MapRequest,
+        timeout: Duration,
+    ) -> Result<(MapReplyHeader, Vec<WireDelta>), CallError> {
+        let records = request.records();
+        if records.len() > MAX_DELTAS_PER_MESSAGE {
+            return Err(CallError::Local(Rejection::new(
+                Status::OverCapacity,
+                format!(
+                    "{} delta records exceed the limit of {MAX_DELTAS_PER_MESSAGE} per message; split the batch or upload the whole map",
+                    records.len()
+                ),
+            )));
+        }
+        let (reply, records) = self.with_connection(timeout, |conn, id, config, names| {
+            let header = request.header(id, conn.reply_to);
+            let mut loan = conn.map.loan_slice_uninit(records.len()).map_err(ipc)?;
+            *loan.user_header_mut() = header;
+            let pending = loan.write_from_slice(&records).send().map_err(ipc)?;
+            if pending.number_of_server_connections() == 0 {
+                return Err(CallError::NoDaemon { service: names.map.clone(), prefix: names.prefix.clone() });
+            }
+            conn.await_reply(
+                config.spin,
+                timeout,
+                || {
+                    let Some(r) = pending.receive().map_err(ipc)? else { return Ok(None) };
+                    let header = *r.user_header();
+                    Ok((header.request_id == id).then(|| (header, r.payload().to_vec())))
+                },
+                || pending.is_connected(),
+            )
+        })?;
+        if reply.status != Status::Ok as u32 {
+            return Err(CallError::Rejected(Rejection::from_wire(reply.status, &reply.detail, reply.error_index)));
+        }
+        Ok((reply, records))
+    }
+
+    /// Creates an empty map at version 0; `map_exists` if the id is taken.
+    pub fn create_map(
+        &mut self,
+        map: MapId,
+        bounds: Bounds,
+        sun: Sun,
+        timeout: Duration,
+    ) -> Result<u64, MapRequestError> {
+        Ok(self.map_call(&MapRequest::Create { map, bounds, sun }, timeout)?.0.version)
+    }
+
+    /// Applies `deltas` to the map as one atomic batch (SPEC §1) and returns the new
+    /// version. With `expected_version`, the map must be at that version first.
+    pub fn apply(
+        &mut self,
+        map: MapId,
+        expected_version: Option<u64>,
+        deltas: &[MapDelta],
+        timeout: Duration,
+    ) -> Result<u64, MapRequestError> {
+        let request = MapRequest::Apply { map, expected_version, deltas: deltas.to_vec() };
+        Ok(self.map_call(&request, timeout)?.0.version)
+    }
+
+    /// Uploads `world`'s bounds, sun, obstacles and voxels as map `map`, in as many
+    /// chunks as it takes; the daemon swaps it in atomically when the last arrives.
+    /// A new map starts at version 0; with `replace`, an existing map is replaced
+    /// whole (one change: version + 1), else `map_exists`. Returns the version.
+    pub fn upload_map(
+        &mut self,
+        map: MapId,
+        world: &World,
+        replace: bool,
+        timeout: Duration,
+    ) -> Result<u64, MapRequestError> {
+        let start = Instant::now();
+        let chunks = world_chunks(world);
+        let upload_id = upload_id(map);
+        let chunk_count = u32::try_from(chunks.len()).unwrap_or(u32::MAX);
+        let mut version = 0;
+        for (i, chunk) in chunks.iter().enumerate() {
+            let deltas = decode_deltas(chunk).map_err(MapRequestError::Invalid)?;
+            let request = MapRequest::Upload {
+                map,
+                upload_id,
+                chunk_index: i as u32,
+                chunk_count,
+                replace,
+                expected_version: None,
+                bounds: *world.bounds(),
+                sun: *world.sun(),
+                deltas,
+            };
+            let left = timeout.saturating_sub(start.elapsed());
+            version = self.map_call(&request, left)?.0.version;
+        }
+        Ok(version)
+    }
+
+    /// The map as it is now, read in pages; retried if it changes while paging.
+    pub fn snapshot(&mut self, map: MapId, timeout: Duration) -> Result<World, MapRequestError> {
+        let start = Instant::now();
+        'attempt: for _ in 0..4 {
+            let left = timeout.saturating_sub(start.elapsed());
+            let (first, records) = self.map_call(&MapRequest::Snapshot { map, page: 0 }, left)?;
+            let mut deltas = decode_deltas(&records).map_err(MapRequestError::Invalid)?;
+            for page in 1..first.chunk_count {
+                let left = timeout.saturating_sub(start.elapsed());
+                let (h, records) = self.map_call(&MapRequest::Snapshot { map, page }, left)?;
+                if h.version != first.version {
+                    continue 'attempt;
+                }
+                deltas.extend(decode_deltas(&records).map_err(MapRequestError::Invalid)?);
+            }
+            let bounds = dyfos_shared::wire::map::decode_bounds(first.bounds).map_err(MapRequestError::Invalid)?;
+            let sun = dyfos_shared::wire::map::decode_sun(first.sun).map_err(MapRequestError::Invalid)?;
+            return dyfos_shared::wire::map::world_from_content(first.version, bounds, sun, &deltas)
+                .map_err(|e| MapRequestError::Invalid(Rejection::new(Status::InvalidDelta, format!("snapshot: {e}"))));
+        }
+        Err(MapRequestError::Rejected(Rejection::new(
+            Status::MapVersionMismatch,
+            "the map kept changing while it was read; retry",
+        )))
+    }
+
+    /// Deletes the map (and its file in the daemon's state directory).
+    pub fn delete_map(
+        &mut self,
+        map: MapId,
+        expected_version: Option<u64>,
+        timeout: Duration,
+    ) -> Result<(), MapRequestError> {
+        self.map_call(&MapRequest::Delete { map, expected_version }, timeout)?;
+        Ok(())
+    }
+
+    /// The daemon's health and counters.
+    pub fn stats(&mut self, timeout: Duration) -> Result<DaemonStats, StatsRequestError> {
+        let reply = self.with_connection(timeout, |conn, id, config, names| {
+            let request = StatsRequest { request_id: id, reply_to: conn.reply_to };
+            let pending = conn.stats.send_copy(request).map_err(ipc)?;
+            if pending.number_of_server_connections() == 0 {
+                return Err(CallError::NoDaemon { service: names.stats.clone(), prefix: names.prefix.clone() });
+            }
+            conn.await_reply(
+                config.spin,
+                timeout,
+                || Ok(pending.receive().map_err(ipc)?.map(|r| *r.payload()).filter(|r| r.request_id == id)),
+                || pending.is_connected(),
+            )
+        })?;
+        Ok(DaemonStats::from(&reply))
+    }
+}
+
+/// An upload id unlikely to collide with another client's: time, process and map.
+fn upload_id(map: MapId) -> u64 {
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
+    let mut x = nanos ^ (u64::from(std::process::id()) << 32) ^ map.rotate_left(17);
+    // splitmix64 finalizer
+    x = (x ^ (x >> 30)).wrapping_mul(0xbf58476d1ce4e5b9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94d049bb133111eb);
+    x ^ (x >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn client_is_send() {
+        fn send<T: Send>() {}
+        send::<Client>();
+    }
+
+    #[test]
+    fn bad_prefix_and_domain_are_refused_before_any_ipc() {
+        let err =
+            Client::connect(&ClientConfig { prefix: "no spaces/".into(), ..ClientConfig::default() }).unwrap_err();
+        assert!(matches!(err, ClientOpenError::InvalidPrefix(_)), "{err}");
+        assert!(iceoryx_config(Some("a/b")).is_err());
+        assert!(iceoryx_config(Some("dyfos_test_1")).is_ok());
+    }
+
+    #[test]
+    fn no_daemon_is_reported_after_the_connect_timeout() {
+        let config = ClientConfig {
+            prefix: format!("dyfos-client-unit-{}/", std::process::id()),
+            connect_timeout: Duration::from_millis(50),
+            domain: Some(format!("dyfu{}_", std::process::id())),
+            ..ClientConfig::default()
+        };
+        let err = Client::connect(&config).unwrap_err();
+        assert!(matches!(err, ClientOpenError::NoDaemon { .. }), "{err}");
+        assert!(err.to_string().contains("dyfosd --prefix dyfos-client-unit-"), "{err}");
+    }
+}

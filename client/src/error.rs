@@ -1,0 +1,144 @@
+//! The client's errors: one enum per operation, each saying what to do.
+
+use dyfos_shared::wire::{PrefixError, Rejection, Status};
+use std::time::Duration;
+
+/// Why [`crate::Client::connect`] failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ClientOpenError {
+    /// The prefix cannot name services.
+    #[error(transparent)]
+    InvalidPrefix(#[from] PrefixError),
+    /// The iceoryx2 domain is not a valid file-name prefix.
+    #[error("iceoryx2 domain `{0}` is not a valid file-name prefix; use letters, digits and `_`")]
+    InvalidDomain(String),
+    /// No daemon serves this prefix.
+    #[error(
+        "no dyfosd serves `{service}` (waited {waited:?}); start one with `dyfosd --prefix {prefix}`, or pass the prefix it uses"
+    )]
+    NoDaemon {
+        /// The service tried.
+        service: String,
+        /// The prefix.
+        prefix: String,
+        /// How long the client waited for it.
+        waited: Duration,
+    },
+    /// The service exists with other payload types: a daemon of another version.
+    #[error(
+        "`{service}` is served with different message types ({reason}); run a dyfosd of the same version as this client"
+    )]
+    Incompatible {
+        /// The service.
+        service: String,
+        /// iceoryx2's reason.
+        reason: String,
+    },
+    /// Any other iceoryx2 failure.
+    #[error("iceoryx2: {0}")]
+    Ipc(String),
+}
+
+/// A request's failure, before it is named by operation.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum CallError {
+    Connect(ClientOpenError),
+    NoDaemon { service: String, prefix: String },
+    DaemonGone,
+    Timeout(Duration),
+    Rejected(Rejection),
+    Local(Rejection),
+    Ipc(String),
+}
+
+impl From<ClientOpenError> for CallError {
+    fn from(e: ClientOpenError) -> Self {
+        CallError::Connect(e)
+    }
+}
+
+macro_rules! request_error {
+    ($(#[$doc:meta])* $name:ident, $what:literal) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, PartialEq, thiserror::Error)]
+        pub enum $name {
+            /// Connecting (or reconnecting) to the daemon failed.
+            #[error(transparent)]
+            Connect(#[from] ClientOpenError),
+            /// No daemon serves the prefix: it is not running or is restarting.
+            #[error("no dyfosd serves `{service}`; start one with `dyfosd --prefix {prefix}` (retryable)")]
+            NoDaemon {
+                /// The service.
+                service: String,
+                /// The prefix.
+                prefix: String,
+            },
+            /// The daemon stopped or restarted while the request was in flight.
+            #[error("dyfosd went away while the {what} request was in flight (stopped or restarted); retry, the client reconnects by itself", what = $what)]
+            DaemonGone,
+            /// No reply in time; the daemon may be overloaded or the query too long.
+            #[error("no reply to the {what} request within {0:?}; raise the timeout, or give the request a shorter deadline or budget", what = $what)]
+            Timeout(Duration),
+            /// The daemon refused the request; nothing changed.
+            #[error("dyfosd rejected the request: {0}")]
+            Rejected(Rejection),
+            /// The client refused to send it (too large, not encodable).
+            #[error("not sent: {0}")]
+            Invalid(Rejection),
+            /// Any other iceoryx2 failure.
+            #[error("iceoryx2: {0}")]
+            Ipc(String),
+        }
+
+        impl $name {
+            /// Whether sending the same request again may succeed: the daemon was
+            /// missing, restarting or busy.
+            pub fn is_retryable(&self) -> bool {
+                match self {
+                    $name::NoDaemon { .. } | $name::DaemonGone => true,
+                    $name::Connect(ClientOpenError::NoDaemon { .. }) => true,
+                    $name::Rejected(r) => r.status.is_retryable(),
+                    _ => false,
+                }
+            }
+
+            /// The daemon's (or the client's) status code, if it refused the request.
+            pub fn status(&self) -> Option<Status> {
+                match self {
+                    $name::Rejected(r) | $name::Invalid(r) => Some(r.status),
+                    _ => None,
+                }
+            }
+        }
+
+        impl From<CallError> for $name {
+            fn from(e: CallError) -> Self {
+                match e {
+                    CallError::Connect(e) => $name::Connect(e),
+                    CallError::NoDaemon { service, prefix } => $name::NoDaemon { service, prefix },
+                    CallError::DaemonGone => $name::DaemonGone,
+                    CallError::Timeout(t) => $name::Timeout(t),
+                    CallError::Rejected(r) => $name::Rejected(r),
+                    CallError::Local(r) => $name::Invalid(r),
+                    CallError::Ipc(s) => $name::Ipc(s),
+                }
+            }
+        }
+    };
+}
+
+request_error!(
+    /// Why a rendezvous query failed.
+    RendezvousError,
+    "rendezvous"
+);
+request_error!(
+    /// Why a map operation (create, apply, upload, snapshot, delete) failed.
+    MapRequestError,
+    "map"
+);
+request_error!(
+    /// Why a stats request failed.
+    StatsRequestError,
+    "stats"
+);

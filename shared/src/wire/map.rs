@@ -1,0 +1,652 @@
+//! The map service (`<prefix>map`): create a map, apply a batch of deltas, upload a
+//! whole map in chunks, snapshot it back in pages, delete it (SPEC §1).
+//!
+//! Map content travels as a slice of fixed-size [`WireDelta`] records. One
+//! [`MapDelta`] is one record, except `SetVoxels`, which is a run header followed
+//! by one record per cell. A batch is applied whole or not at all; its error names
+//! the failing delta's index in the batch.
+//!
+//! A map larger than one message ([`MAX_DELTAS_PER_MESSAGE`] records) is uploaded
+//! as numbered chunks `0..chunk_count` of one `upload_id`, each self-contained
+//! ([`world_chunks`]); the daemon builds the map only when the last chunk arrives in
+//! order. *Interpretation:* an upload replaces the map whole, which counts as one
+//! change (version + 1), and a new map starts at version 0, so a scenario uploaded
+//! to a fresh id answers with `map_version` 0, as `dyfos solve` does.
+//!
+//! ```
+//! use dyfos_shared::wire::map::{MapRequest, decode_deltas, encode_deltas};
+//! use dyfos_shared::world::{MapDelta, Sun};
+//!
+//! let batch = vec![MapDelta::SetSun(Sun::new(0.5, 1.0).unwrap()), MapDelta::RemoveObstacle { id: 3 }];
+//! let records = encode_deltas(&batch);
+//! assert_eq!(decode_deltas(&records).unwrap(), batch);
+//! let request = MapRequest::Apply { map: 7, expected_version: Some(2), deltas: batch };
+//! let header = request.header(1, [0, 0]);
+//! assert_eq!(MapRequest::decode(&header, &request.records()).unwrap(), request);
+//! ```
+#![allow(unsafe_code)] // SAFETY: only `#[derive(ZeroCopySend)]` below, on `#[repr(C)]` structs of plain numbers.
+
+use super::{ANY_VERSION, Detail, Rejection, Status};
+use crate::limits::{MAX_DELTAS_PER_MESSAGE, MAX_UPLOAD_CHUNKS};
+use crate::math::{Point2, Point3};
+use crate::world::{AxisBox, Bounds, MapDelta, Obstacle, Sun, VerticalCylinder, World};
+use iceoryx2::prelude::ZeroCopySend;
+
+/// A map id, chosen by the client that creates the map.
+pub type MapId = u64;
+
+/// Record tags of [`WireDelta`].
+pub mod tag {
+    /// Upsert a vertical cylinder: `id`, values `[x, y, radius, height]`.
+    pub const UPSERT_CYLINDER: u32 = 1;
+    /// Upsert an axis-aligned box: `id`, values `[min x, y, z, max x, y, z]`.
+    pub const UPSERT_BOX: u32 = 2;
+    /// Remove obstacle `id`.
+    pub const REMOVE_OBSTACLE: u32 = 3;
+    /// Voxel run header: values `[resolution, origin x, y, z]`, `flag` 1 occupied /
+    /// 0 free, `cell[0]` the number of [`VOXEL_CELL`] records that follow.
+    pub const VOXEL_RUN: u32 = 4;
+    /// One cell of the preceding run: `cell`.
+    pub const VOXEL_CELL: u32 = 5;
+    /// Set the sun: values `[elevation, azimuth]`.
+    pub const SET_SUN: u32 = 6;
+    /// Set the bounds: values `[x_min, y_min, x_max, y_max]`.
+    pub const SET_BOUNDS: u32 = 7;
+    /// Remove every obstacle and voxel.
+    pub const CLEAR: u32 = 8;
+}
+
+/// One map-delta record. Fields a tag does not use are ignored (write zeros);
+/// `reserved` must be 0 and `flag` is 0 except in a voxel run.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("dyfos::WireDelta")]
+#[repr(C)]
+pub struct WireDelta {
+    /// One of [`tag`].
+    pub tag: u32,
+    /// Voxel run: 1 occupied, 0 free.
+    pub flag: u32,
+    /// Obstacle id.
+    pub id: u32,
+    /// Must be 0.
+    pub reserved: u32,
+    /// Numbers, by tag.
+    pub values: [f64; 6],
+    /// Cell index, or the run length in a run header.
+    pub cell: [i64; 3],
+}
+
+/// Map operations ([`MapRequestHeader::op`]).
+pub mod op {
+    /// Create an empty map with `bounds` and `sun`.
+    pub const CREATE: u32 = 1;
+    /// Apply the records as one atomic batch.
+    pub const APPLY: u32 = 2;
+    /// One chunk of a whole-map upload.
+    pub const UPLOAD: u32 = 3;
+    /// Page `chunk_index` of the map's content.
+    pub const SNAPSHOT: u32 = 4;
+    /// Delete the map.
+    pub const DELETE: u32 = 5;
+}
+
+/// [`MapRequestHeader::flags`] bit of an upload: replace an existing map.
+pub const FLAG_REPLACE: u32 = 1;
+
+/// The fixed part of a map request (the iceoryx2 request user header).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("dyfos::MapRequestHeader")]
+#[repr(C)]
+pub struct MapRequestHeader {
+    /// One of [`op`].
+    pub op: u32,
+    /// Upload: [`FLAG_REPLACE`]; otherwise 0.
+    pub flags: u32,
+    /// The map.
+    pub map_id: u64,
+    /// Apply, upload-replace, delete: the version the map must have, or [`ANY_VERSION`].
+    pub expected_version: u64,
+    /// The client's id for this request, echoed in the reply.
+    pub request_id: u64,
+    /// Upload: the client's id of the whole upload.
+    pub upload_id: u64,
+    /// Upload: this chunk's number; snapshot: the page wanted.
+    pub chunk_index: u32,
+    /// Upload: the number of chunks.
+    pub chunk_count: u32,
+    /// Create and upload: `[x_min, y_min, x_max, y_max]`.
+    pub bounds: [f64; 4],
+    /// Create and upload: `[elevation, azimuth]`.
+    pub sun: [f64; 2],
+    /// The client's reply listener id ([`super::split_u128`]).
+    pub reply_to: [u64; 2],
+}
+
+/// The fixed part of a map reply (the iceoryx2 response user header); a snapshot
+/// page's content is the response's record slice.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("dyfos::MapReplyHeader")]
+#[repr(C)]
+pub struct MapReplyHeader {
+    /// A [`Status`] code.
+    pub status: u32,
+    /// Snapshot: this page's number; upload: the chunk acknowledged.
+    pub chunk_index: u32,
+    /// Snapshot: the number of pages.
+    pub chunk_count: u32,
+    /// 0.
+    pub reserved: u32,
+    /// The request's id.
+    pub request_id: u64,
+    /// The map.
+    pub map_id: u64,
+    /// The map's version after the operation (snapshot: the version paged).
+    pub version: u64,
+    /// Snapshot: the map's bounds.
+    pub bounds: [f64; 4],
+    /// Snapshot: the map's sun.
+    pub sun: [f64; 2],
+    /// For delta errors, the failing delta's index, else `u64::MAX`.
+    pub error_index: u64,
+    /// What went wrong, for people.
+    pub detail: Detail,
+}
+
+/// A validated map request.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MapRequest {
+    /// Create an empty map at version 0.
+    Create {
+        /// Its id (must be free).
+        map: MapId,
+        /// Bounds.
+        bounds: Bounds,
+        /// Sun.
+        sun: Sun,
+    },
+    /// Apply a batch of deltas atomically.
+    Apply {
+        /// The map.
+        map: MapId,
+        /// The version it must have, or `None` for any.
+        expected_version: Option<u64>,
+        /// The batch.
+        deltas: Vec<MapDelta>,
+    },
+    /// One chunk of a whole-map upload.
+    Upload {
+        /// The map.
+        map: MapId,
+        /// The client's id of this upload.
+        upload_id: u64,
+        /// This chunk's number, from 0.
+        chunk_index: u32,
+        /// Chunks in the upload, 1..=[`MAX_UPLOAD_CHUNKS`].
+        chunk_count: u32,
+        /// Whether an existing map may be replaced.
+        replace: bool,
+        /// When replacing, the version the map must have.
+        expected_version: Option<u64>,
+        /// The new map's bounds.
+        bounds: Bounds,
+        /// The new map's sun.
+        sun: Sun,
+        /// This chunk's content (obstacle upserts and voxel runs).
+        deltas: Vec<MapDelta>,
+    },
+    /// One page of the map's content.
+    Snapshot {
+        /// The map.
+        map: MapId,
+        /// The page, from 0.
+        page: u32,
+    },
+    /// Delete the map.
+    Delete {
+        /// The map.
+        map: MapId,
+        /// The version it must have, or `None` for any.
+        expected_version: Option<u64>,
+    },
+}
+
+fn version_of(v: u64) -> Option<u64> {
+    (v != ANY_VERSION).then_some(v)
+}
+
+fn malformed(message: impl Into<String>) -> Rejection {
+    Rejection::new(Status::MalformedRequest, message)
+}
+
+/// Bounds from the wire, or `invalid_delta` naming the field.
+pub fn decode_bounds(b: [f64; 4]) -> Result<Bounds, Rejection> {
+    Bounds::new(b).map_err(|e| Rejection::new(Status::InvalidDelta, e.to_string()))
+}
+
+/// A sun from the wire, or `invalid_delta` naming the field.
+pub fn decode_sun(s: [f64; 2]) -> Result<Sun, Rejection> {
+    Sun::new(s[0], s[1]).map_err(|e| Rejection::new(Status::InvalidDelta, e.to_string()))
+}
+
+impl MapRequest {
+    /// Decodes and checks a request's shape: operation, flags, chunk numbering,
+    /// record count and records. Map content is validated when applied.
+    pub fn decode(h: &MapRequestHeader, records: &[WireDelta]) -> Result<Self, Rejection> {
+        if records.len() > MAX_DELTAS_PER_MESSAGE {
+            return Err(Rejection::new(
+                Status::OverCapacity,
+                format!(
+                    "{} records exceed the limit of {MAX_DELTAS_PER_MESSAGE} per message; upload large maps in chunks",
+                    records.len()
+                ),
+            ));
+        }
+        let no_records = |what: &str| {
+            if records.is_empty() {
+                Ok(())
+            } else {
+                Err(malformed(format!("{what} carries no records, got {}", records.len())))
+            }
+        };
+        let no_flags = |what: &str| {
+            if h.flags == 0 { Ok(()) } else { Err(malformed(format!("{what}: flags = {} must be 0", h.flags))) }
+        };
+        let map = h.map_id;
+        match h.op {
+            op::CREATE => {
+                no_flags("create")?;
+                no_records("create")?;
+                Ok(MapRequest::Create { map, bounds: decode_bounds(h.bounds)?, sun: decode_sun(h.sun)? })
+            }
+            op::APPLY => {
+                no_flags("apply")?;
+                Ok(MapRequest::Apply {
+                    map,
+                    expected_version: version_of(h.expected_version),
+                    deltas: decode_deltas(records)?,
+                })
+            }
+            op::UPLOAD => {
+                if h.flags & !FLAG_REPLACE != 0 {
+                    return Err(malformed(format!("upload: flags = {} has unknown bits", h.flags)));
+                }
+                if h.chunk_count == 0 || h.chunk_count > MAX_UPLOAD_CHUNKS {
+                    return Err(Rejection::new(
+                        Status::OverCapacity,
+                        format!("upload: chunk_count = {} must be in 1..={MAX_UPLOAD_CHUNKS}", h.chunk_count),
+                    ));
+                }
+                if h.chunk_index >= h.chunk_count {
+                    return Err(Rejection::new(
+                        Status::ChunkOutOfOrder,
+                        format!("upload: chunk_index = {} is past chunk_count = {}", h.chunk_index, h.chunk_count),
+                    ));
+                }
+                let deltas = decode_deltas(records)?;
+                if let Some(i) = deltas.iter().position(|d| {
+                    !matches!(d, MapDelta::UpsertObstacle { .. } | MapDelta::SetVoxels { occupied: true, .. })
+                }) {
+                    return Err(Rejection {
+                        status: Status::MalformedDelta,
+                        message: format!(
+                            "upload chunks carry only obstacle upserts and occupied voxel runs; delta #{i} is not one"
+                        ),
+                        index: Some(i as u64),
+                    });
+                }
+                Ok(MapRequest::Upload {
+                    map,
+                    upload_id: h.upload_id,
+                    chunk_index: h.chunk_index,
+                    chunk_count: h.chunk_count,
+                    replace: h.flags & FLAG_REPLACE != 0,
+                    expected_version: version_of(h.expected_version),
+                    bounds: decode_bounds(h.bounds)?,
+                    sun: decode_sun(h.sun)?,
+                    deltas,
+                })
+            }
+            op::SNAPSHOT => {
+                no_flags("snapshot")?;
+                no_records("snapshot")?;
+                Ok(MapRequest::Snapshot { map, page: h.chunk_index })
+            }
+            op::DELETE => {
+                no_flags("delete")?;
+                no_records("delete")?;
+                Ok(MapRequest::Delete { map, expected_version: version_of(h.expected_version) })
+            }
+            other => Err(malformed(format!("op = {other} is not a map operation (1 create .. 5 delete)"))),
+        }
+    }
+
+    /// The map this request is about.
+    pub fn map(&self) -> MapId {
+        match self {
+            MapRequest::Create { map, .. }
+            | MapRequest::Apply { map, .. }
+            | MapRequest::Upload { map, .. }
+            | MapRequest::Snapshot { map, .. }
+            | MapRequest::Delete { map, .. } => *map,
+        }
+    }
+
+    /// The header to send.
+    pub fn header(&self, request_id: u64, reply_to: [u64; 2]) -> MapRequestHeader {
+        let mut h = MapRequestHeader {
+            map_id: self.map(),
+            request_id,
+            reply_to,
+            expected_version: ANY_VERSION,
+            ..Default::default()
+        };
+        match self {
+            MapRequest::Create { bounds, sun, .. } => {
+                h.op = op::CREATE;
+                h.bounds = bounds.to_array();
+                h.sun = [sun.elevation, sun.azimuth];
+            }
+            MapRequest::Apply { expected_version, .. } => {
+                h.op = op::APPLY;
+                h.expected_version = expected_version.unwrap_or(ANY_VERSION);
+            }
+            MapRequest::Upload {
+                upload_id, chunk_index, chunk_count, replace, expected_version, bounds, sun, ..
+            } => {
+                h.op = op::UPLOAD;
+                h.flags = if *replace { FLAG_REPLACE } else { 0 };
+                h.upload_id = *upload_id;
+                h.chunk_index = *chunk_index;
+                h.chunk_count = *chunk_count;
+                h.expected_version = expected_version.unwrap_or(ANY_VERSION);
+                h.bounds = bounds.to_array();
+                h.sun = [sun.elevation, sun.azimuth];
+            }
+            MapRequest::Snapshot { page, .. } => {
+                h.op = op::SNAPSHOT;
+                h.chunk_index = *page;
+            }
+            MapRequest::Delete { expected_version, .. } => {
+                h.op = op::DELETE;
+                h.expected_version = expected_version.unwrap_or(ANY_VERSION);
+            }
+        }
+        h
+    }
+
+    /// The records to send.
+    pub fn records(&self) -> Vec<WireDelta> {
+        match self {
+            MapRequest::Apply { deltas, .. } | MapRequest::Upload { deltas, .. } => encode_deltas(deltas),
+            _ => Vec::new(),
+        }
+    }
+}
+
+/// Number of records `delta` takes.
+pub fn record_count(delta: &MapDelta) -> usize {
+    match delta {
+        MapDelta::SetVoxels { cells, .. } => 1 + cells.len(),
+        _ => 1,
+    }
+}
+
+fn push_delta(out: &mut Vec<WireDelta>, delta: &MapDelta) {
+    let mut r = WireDelta::default();
+    match delta {
+        MapDelta::UpsertObstacle { id, obstacle: Obstacle::Cylinder(c) } => {
+            r.tag = tag::UPSERT_CYLINDER;
+            r.id = *id;
+            r.values[..4].copy_from_slice(&[c.center.x, c.center.y, c.radius, c.height]);
+        }
+        MapDelta::UpsertObstacle { id, obstacle: Obstacle::Box(b) } => {
+            r.tag = tag::UPSERT_BOX;
+            r.id = *id;
+            r.values = [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z];
+        }
+        MapDelta::RemoveObstacle { id } => {
+            r.tag = tag::REMOVE_OBSTACLE;
+            r.id = *id;
+        }
+        MapDelta::SetVoxels { resolution, origin, cells, occupied } => {
+            r.tag = tag::VOXEL_RUN;
+            r.flag = u32::from(*occupied);
+            r.values[..4].copy_from_slice(&[*resolution, origin.x, origin.y, origin.z]);
+            r.cell[0] = cells.len() as i64;
+            out.push(r);
+            out.extend(cells.iter().map(|c| WireDelta { tag: tag::VOXEL_CELL, cell: *c, ..Default::default() }));
+            return;
+        }
+        MapDelta::SetSun(s) => {
+            r.tag = tag::SET_SUN;
+            r.values[..2].copy_from_slice(&[s.elevation, s.azimuth]);
+        }
+        MapDelta::SetBounds(b) => {
+            r.tag = tag::SET_BOUNDS;
+            r.values[..4].copy_from_slice(&b.to_array());
+        }
+        MapDelta::Clear => r.tag = tag::CLEAR,
+    }
+    out.push(r);
+}
+
+/// The records of a batch of deltas.
+pub fn encode_deltas(deltas: &[MapDelta]) -> Vec<WireDelta> {
+    let mut out = Vec::with_capacity(deltas.iter().map(record_count).sum());
+    for d in deltas {
+        push_delta(&mut out, d);
+    }
+    out
+}
+
+/// Decodes records into deltas. Checks tags, flags, reserved fields and voxel runs;
+/// numbers are checked when the deltas are applied ([`World::apply`]). Sun and
+/// bounds records are not range-checked here either: the map does that.
+pub fn decode_deltas(records: &[WireDelta]) -> Result<Vec<MapDelta>, Rejection> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < records.len() {
+        let r = records[i];
+        let index = out.len() as u64;
+        let bad = |message: String| Rejection { status: Status::MalformedDelta, message, index: Some(index) };
+        if r.reserved != 0 {
+            return Err(bad(format!("record {i}: reserved = {} must be 0", r.reserved)));
+        }
+        if r.tag != tag::VOXEL_RUN && r.flag != 0 {
+            return Err(bad(format!("record {i}: flag = {} must be 0 for tag {}", r.flag, r.tag)));
+        }
+        let v = r.values;
+        let delta = match r.tag {
+            tag::UPSERT_CYLINDER => MapDelta::UpsertObstacle {
+                id: r.id,
+                obstacle: Obstacle::Cylinder(VerticalCylinder {
+                    center: Point2::new(v[0], v[1]),
+                    radius: v[2],
+                    height: v[3],
+                }),
+            },
+            tag::UPSERT_BOX => MapDelta::UpsertObstacle {
+                id: r.id,
+                obstacle: Obstacle::Box(AxisBox {
+                    min: Point3::new(v[0], v[1], v[2]),
+                    max: Point3::new(v[3], v[4], v[5]),
+                }),
+            },
+            tag::REMOVE_OBSTACLE => MapDelta::RemoveObstacle { id: r.id },
+            tag::VOXEL_RUN => {
+                let occupied = match r.flag {
+                    0 => false,
+                    1 => true,
+                    f => return Err(bad(format!("record {i}: voxel run flag = {f} must be 0 (free) or 1 (occupied)"))),
+                };
+                let remaining = (records.len() - i - 1) as i64;
+                let n = r.cell[0];
+                if !(0..=remaining).contains(&n) {
+                    return Err(bad(format!(
+                        "record {i}: voxel run of {n} cells, but {remaining} records follow (truncated run)"
+                    )));
+                }
+                let cells = &records[i + 1..i + 1 + n as usize];
+                if let Some(k) = cells.iter().position(|c| c.tag != tag::VOXEL_CELL || c.flag != 0 || c.reserved != 0) {
+                    return Err(bad(format!("record {}: expected a voxel cell record of the run at {i}", i + 1 + k)));
+                }
+                out.push(MapDelta::SetVoxels {
+                    resolution: v[0],
+                    origin: Point3::new(v[1], v[2], v[3]),
+                    cells: cells.iter().map(|c| c.cell).collect(),
+                    occupied,
+                });
+                i += 1 + n as usize;
+                continue;
+            }
+            tag::VOXEL_CELL => return Err(bad(format!("record {i}: voxel cell outside a run"))),
+            tag::SET_SUN => MapDelta::SetSun(Sun { elevation: v[0], azimuth: v[1] }),
+            tag::SET_BOUNDS => {
+                MapDelta::SetBounds(Bounds { min: Point2::new(v[0], v[1]), max: Point2::new(v[2], v[3]) })
+            }
+            tag::CLEAR => MapDelta::Clear,
+            t => return Err(bad(format!("record {i}: tag = {t} is not a delta (1 upsert cylinder .. 8 clear)"))),
+        };
+        out.push(delta);
+        i += 1;
+    }
+    Ok(out)
+}
+
+/// A map's content (obstacles, then occupied voxels) as self-contained chunks of at
+/// most [`MAX_DELTAS_PER_MESSAGE`] records each; at least one chunk, maybe empty.
+pub fn world_chunks(world: &World) -> Vec<Vec<WireDelta>> {
+    let mut chunks: Vec<Vec<WireDelta>> = vec![Vec::new()];
+    let room = |chunks: &mut Vec<Vec<WireDelta>>, need: usize| {
+        if chunks.last().is_some_and(|c| c.len() + need > MAX_DELTAS_PER_MESSAGE) {
+            chunks.push(Vec::new());
+        }
+    };
+    for (id, obstacle) in world.obstacles() {
+        room(&mut chunks, 1);
+        push_delta(chunks.last_mut().expect("one chunk"), &MapDelta::UpsertObstacle { id: *id, obstacle: *obstacle });
+    }
+    if let Some(grid) = world.voxels() {
+        let cells: Vec<_> = grid.occupied().copied().collect();
+        let mut rest = &cells[..];
+        // A grid with no cells still carries its resolution and origin.
+        loop {
+            room(&mut chunks, 2.min(1 + rest.len()));
+            let chunk = chunks.last_mut().expect("one chunk");
+            let take = rest.len().min(MAX_DELTAS_PER_MESSAGE - chunk.len() - 1);
+            let run = MapDelta::SetVoxels {
+                resolution: grid.resolution(),
+                origin: grid.origin(),
+                cells: rest[..take].to_vec(),
+                occupied: true,
+            };
+            push_delta(chunk, &run);
+            rest = &rest[take..];
+            if rest.is_empty() {
+                break;
+            }
+        }
+    }
+    chunks
+}
+
+/// The map with `bounds`, `sun` and the content `deltas` (upserts and voxel runs,
+/// as [`world_chunks`] makes), at `version`.
+pub fn world_from_content(
+    version: u64,
+    bounds: Bounds,
+    sun: Sun,
+    deltas: &[MapDelta],
+) -> Result<World, crate::world::MapDeltaError> {
+    let built = World::empty(bounds, sun).apply(deltas)?;
+    let rebuilt =
+        World::new(version, bounds, sun, built.obstacles().iter().map(|(i, o)| (*i, *o)), built.voxels().cloned());
+    // `apply` validated every obstacle already; `new` cannot fail on its output.
+    rebuilt.map_err(|kind| crate::world::MapDeltaError { index: 0, kind })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::VoxelGrid;
+
+    fn sample_world(cells: usize, obstacles: u32) -> World {
+        let voxels =
+            VoxelGrid::new(0.25, Point3::new(-1.0, -2.0, 0.0), (0..cells as i64).map(|i| [i % 97, i / 97, i % 5]))
+                .unwrap();
+        let obs = (0..obstacles).map(|i| {
+            (
+                i * 2 + 1,
+                Obstacle::Cylinder(VerticalCylinder {
+                    center: Point2::new(f64::from(i), 0.5),
+                    radius: 0.3,
+                    height: 2.0,
+                }),
+            )
+        });
+        World::new(4, Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(), Sun::new(0.3, 1.0).unwrap(), obs, Some(voxels))
+            .unwrap()
+    }
+
+    #[test]
+    fn world_round_trips_through_chunks() {
+        for (cells, obstacles) in [(0, 0), (3, 2), (MAX_DELTAS_PER_MESSAGE * 2 + 7, 5000)] {
+            let world = sample_world(cells, obstacles);
+            let chunks = world_chunks(&world);
+            assert!(chunks.iter().all(|c| c.len() <= MAX_DELTAS_PER_MESSAGE));
+            let deltas: Vec<MapDelta> = chunks.iter().flat_map(|c| decode_deltas(c).unwrap()).collect();
+            let back = world_from_content(4, *world.bounds(), *world.sun(), &deltas).unwrap();
+            assert_eq!(back, world, "{cells} cells, {obstacles} obstacles");
+        }
+    }
+
+    #[test]
+    fn malformed_records_are_rejected_with_their_index() {
+        let good = encode_deltas(&[
+            MapDelta::Clear,
+            MapDelta::SetVoxels { resolution: 1.0, origin: Point3::origin(), cells: vec![[1, 2, 3]], occupied: true },
+        ]);
+        let cases: Vec<(Vec<WireDelta>, u64)> = vec![
+            (vec![WireDelta { tag: 99, ..good[0] }], 0),
+            (vec![good[0], WireDelta { reserved: 1, ..good[1] }], 1),
+            (vec![good[0], WireDelta { flag: 2, ..good[1] }], 1),
+            (vec![good[0], WireDelta { flag: 1, ..good[0] }], 1),
+            (good[..2].to_vec(), 1),     // run truncated
+            (vec![good[0], good[2]], 1), // cell outside a run
+            (vec![good[0], WireDelta { cell: [-1, 0, 0], ..good[1] }, good[2]], 1),
+        ];
+        for (records, index) in cases {
+            let err = decode_deltas(&records).unwrap_err();
+            assert_eq!(err.status, Status::MalformedDelta, "{records:?}");
+            assert_eq!(err.index, Some(index), "{err}");
+        }
+    }
+
+    #[test]
+    fn headers_are_checked() {
+        let up = MapRequest::Upload {
+            map: 1,
+            upload_id: 9,
+            chunk_index: 0,
+            chunk_count: 2,
+            replace: true,
+            expected_version: None,
+            bounds: Bounds::new([0.0, 0.0, 1.0, 1.0]).unwrap(),
+            sun: Sun::new(0.1, 0.0).unwrap(),
+            deltas: vec![],
+        };
+        let h = up.header(5, [1, 2]);
+        assert_eq!(MapRequest::decode(&h, &[]).unwrap(), up);
+        let status = |h: MapRequestHeader| MapRequest::decode(&h, &[]).unwrap_err().status;
+        assert_eq!(status(MapRequestHeader { op: 0, ..h }), Status::MalformedRequest);
+        assert_eq!(status(MapRequestHeader { flags: 2, ..h }), Status::MalformedRequest);
+        assert_eq!(status(MapRequestHeader { chunk_count: 0, ..h }), Status::OverCapacity);
+        assert_eq!(status(MapRequestHeader { chunk_index: 2, ..h }), Status::ChunkOutOfOrder);
+        assert_eq!(status(MapRequestHeader { bounds: [0.0, 0.0, f64::NAN, 1.0], ..h }), Status::InvalidDelta);
+        let too_many = vec![WireDelta { tag: tag::CLEAR, ..Default::default() }; MAX_DELTAS_PER_MESSAGE + 1];
+        assert_eq!(
+            MapRequest::decode(&MapRequestHeader { op: op::APPLY, ..h }, &too_many).unwrap_err().status,
+            Status::OverCapacity
+        );
+    }
+}

@@ -1,0 +1,548 @@
+//! The rendezvous service (`<prefix>rendezvous`): where should the viewer's camera
+//! be to localize the rover at the rendezvous (SPEC §2, §8)?
+//!
+//! The request is a [`RendezvousRequestHeader`] (the iceoryx2 request user header)
+//! plus a slice of inline [`WireDelta`] records that are applied to the map, all or
+//! none, before the search. The reply is one [`RendezvousReply`] carrying the full
+//! answer of `dyfos solve`, or an error code.
+//!
+//! *Interpretations:* the expected version is checked against the map *before* the
+//! inline deltas; the answer's `map_version` is the version searched (after them).
+//! The deadline is relative, counted from the moment the daemon receives the
+//! request (queueing included): processes share no clock on the wire.
+//!
+//! ```
+//! use dyfos_shared::prelude::*;
+//! use dyfos_shared::wire::rendezvous::{Mode, RendezvousRequest};
+//!
+//! let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
+//! let request = RendezvousRequest { seed: 7, ..RendezvousRequest::new(1, belief) };
+//! let header = request.header(Mode::Solve, 42, [0, 0]);
+//! let (decoded, mode) = RendezvousRequest::decode(&header, &request.records()).unwrap();
+//! assert_eq!((decoded, mode), (request, Mode::Solve));
+//! let mut bad = header;
+//! bad.cov[0][0] = f64::NAN;
+//! assert_eq!(RendezvousRequest::decode(&bad, &[]).unwrap_err().status.name(), "invalid_belief");
+//! ```
+#![allow(unsafe_code)] // SAFETY: only `#[derive(ZeroCopySend)]` below, on `#[repr(C)]` structs of plain numbers.
+
+use super::map::{MapId, WireDelta, decode_deltas, encode_deltas};
+use super::{ANY_VERSION, Detail, Rejection, Status};
+use crate::answer::{Algorithm, Answer, EvalStats, StopReason};
+use crate::limits::{MAX_DEADLINE_MICROS, MAX_INLINE_DELTAS};
+use crate::math::{Matrix3, Point3, UnitQuaternion, Vector3};
+use crate::params::{ModelKind, Params};
+use crate::posterior::Belief;
+use crate::world::MapDelta;
+use iceoryx2::prelude::ZeroCopySend;
+use std::time::Duration;
+
+/// What the daemon does with a valid request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Search and answer.
+    Solve = 0,
+    /// Validate everything (map, version, belief, parameters, inline deltas on a
+    /// copy of the map) and answer at once without searching or changing the map:
+    /// the round-trip floor, for latency benchmarks and health checks.
+    Check = 1,
+}
+
+/// Every parameter of SPEC §11, as plain numbers. `model`: 0 paper, 1 anisotropic,
+/// 2 learned.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("dyfos::WireParams")]
+#[repr(C)]
+pub struct WireParams {
+    /// `rover_radius`, m.
+    pub rover_radius: f64,
+    /// `marker_size`, m.
+    pub marker_size: f64,
+    /// `marker_height`, m.
+    pub marker_height: f64,
+    /// `viewer_radius`, m.
+    pub viewer_radius: f64,
+    /// `safety_margin`, m.
+    pub safety_margin: f64,
+    /// `z_min`, m.
+    pub z_min: f64,
+    /// `z_max`, m.
+    pub z_max: f64,
+    /// `camera_pitch`, rad.
+    pub camera_pitch: f64,
+    /// `t_vs`, m.
+    pub t_vs: [f64; 3],
+    /// `f_h`, rad.
+    pub f_h: f64,
+    /// `f_v`, rad.
+    pub f_v: f64,
+    /// `rho_min`, m.
+    pub rho_min: f64,
+    /// `rho_max`, m.
+    pub rho_max: f64,
+    /// `kappa`.
+    pub kappa: f64,
+    /// `lambda`.
+    pub lambda: f64,
+    /// `perimeter_points`.
+    pub perimeter_points: u32,
+    /// 0 paper, 1 anisotropic, 2 learned.
+    pub model: u32,
+}
+
+impl From<&Params> for WireParams {
+    fn from(p: &Params) -> Self {
+        WireParams {
+            rover_radius: p.rover_radius,
+            marker_size: p.marker_size,
+            marker_height: p.marker_height,
+            viewer_radius: p.viewer_radius,
+            safety_margin: p.safety_margin,
+            z_min: p.z_min,
+            z_max: p.z_max,
+            camera_pitch: p.camera_pitch,
+            t_vs: p.t_vs.into(),
+            f_h: p.f_h,
+            f_v: p.f_v,
+            rho_min: p.rho_min,
+            rho_max: p.rho_max,
+            kappa: p.kappa,
+            lambda: p.lambda,
+            perimeter_points: p.perimeter_points,
+            model: match p.model {
+                ModelKind::Paper => 0,
+                ModelKind::Anisotropic => 1,
+                ModelKind::Learned => 2,
+            },
+        }
+    }
+}
+
+impl TryFrom<&WireParams> for Params {
+    type Error = Rejection;
+
+    /// Decodes and validates (SPEC §11 ranges): `invalid_params` names the field.
+    fn try_from(w: &WireParams) -> Result<Self, Rejection> {
+        let model = match w.model {
+            0 => ModelKind::Paper,
+            1 => ModelKind::Anisotropic,
+            2 => ModelKind::Learned,
+            m => {
+                return Err(Rejection::new(
+                    Status::InvalidParams,
+                    format!("params.model = {m} is not a model (0 paper, 1 anisotropic, 2 learned)"),
+                ));
+            }
+        };
+        let p = Params {
+            rover_radius: w.rover_radius,
+            perimeter_points: w.perimeter_points,
+            marker_size: w.marker_size,
+            marker_height: w.marker_height,
+            viewer_radius: w.viewer_radius,
+            safety_margin: w.safety_margin,
+            z_min: w.z_min,
+            z_max: w.z_max,
+            camera_pitch: w.camera_pitch,
+            t_vs: Vector3::from(w.t_vs),
+            f_h: w.f_h,
+            f_v: w.f_v,
+            rho_min: w.rho_min,
+            rho_max: w.rho_max,
+            kappa: w.kappa,
+            lambda: w.lambda,
+            model,
+        };
+        p.validate().map_err(|e| Rejection::new(Status::InvalidParams, format!("params.{e}")))?;
+        Ok(p)
+    }
+}
+
+/// The fixed part of a rendezvous request (the iceoryx2 request user header).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("dyfos::RendezvousRequestHeader")]
+#[repr(C)]
+pub struct RendezvousRequestHeader {
+    /// The client's id for this request, echoed in the reply.
+    pub request_id: u64,
+    /// The map to search.
+    pub map_id: u64,
+    /// The version the map must have (before the inline deltas), or [`ANY_VERSION`].
+    pub expected_version: u64,
+    /// Seed of the search's random stream.
+    pub seed: u64,
+    /// Most candidates to evaluate; 0 for the algorithm's own limits.
+    pub budget: u64,
+    /// Deadline in µs after the daemon receives the request; 0 for none.
+    pub deadline_micros: u64,
+    /// Belief mean (x, y, θ).
+    pub mean: [f64; 3],
+    /// Belief covariance Σ⁻, rows.
+    pub cov: [[f64; 3]; 3],
+    /// Parameters.
+    pub params: WireParams,
+    /// 0 dyfos, 1 dyfos-scipy, 2 brute, 3 random, 4 center ([`Algorithm::ALL`] order).
+    pub algorithm: u32,
+    /// 0 solve, 1 check ([`Mode`]).
+    pub mode: u32,
+    /// The client's reply listener id ([`super::split_u128`]).
+    pub reply_to: [u64; 2],
+}
+
+/// A rendezvous query, validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RendezvousRequest {
+    /// The map to search.
+    pub map: MapId,
+    /// The version the map must have before `deltas`; `None` accepts any.
+    pub expected_version: Option<u64>,
+    /// The rover's a priori belief at the rendezvous (SPEC §2).
+    pub belief: Belief,
+    /// Deltas applied to the map, all or none, before the search (a newly seen
+    /// obstacle, a moved sun). They change the stored map.
+    pub deltas: Vec<MapDelta>,
+    /// The search algorithm.
+    pub algorithm: Algorithm,
+    /// Seed: the same request and seed give the same answer, bit for bit.
+    pub seed: u64,
+    /// Most candidates to evaluate; `None` for the algorithm's own limits.
+    pub budget: Option<u64>,
+    /// Time allowed from receipt to answer; when it passes the daemon answers with
+    /// the best feasible pose so far (`stop = deadline`) or `deadline_exceeded`.
+    pub deadline: Option<Duration>,
+    /// Parameters (SPEC defaults unless overridden).
+    pub params: Params,
+}
+
+impl RendezvousRequest {
+    /// A `dyfos` query of `map` for `belief`, seed 0, any version, SPEC parameters,
+    /// no deltas, no budget or deadline.
+    pub fn new(map: MapId, belief: Belief) -> Self {
+        RendezvousRequest {
+            map,
+            expected_version: None,
+            belief,
+            deltas: Vec::new(),
+            algorithm: Algorithm::Dyfos,
+            seed: 0,
+            budget: None,
+            deadline: None,
+            params: Params::default(),
+        }
+    }
+
+    /// The header to send.
+    pub fn header(&self, mode: Mode, request_id: u64, reply_to: [u64; 2]) -> RendezvousRequestHeader {
+        let index = Algorithm::ALL.iter().position(|a| *a == self.algorithm).expect("every algorithm has a tag");
+        RendezvousRequestHeader {
+            request_id,
+            map_id: self.map,
+            expected_version: self.expected_version.unwrap_or(ANY_VERSION),
+            seed: self.seed,
+            budget: self.budget.unwrap_or(0),
+            deadline_micros: self.deadline.map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX).max(1)),
+            mean: self.belief.mean.into(),
+            cov: self.belief.cov.to_rows(),
+            params: WireParams::from(&self.params),
+            algorithm: index as u32,
+            mode: mode as u32,
+            reply_to,
+        }
+    }
+
+    /// The inline delta records to send.
+    pub fn records(&self) -> Vec<WireDelta> {
+        encode_deltas(&self.deltas)
+    }
+
+    /// Decodes and validates every field; the map-dependent checks (id, version,
+    /// deltas applying cleanly) are the daemon's.
+    pub fn decode(h: &RendezvousRequestHeader, records: &[WireDelta]) -> Result<(Self, Mode), Rejection> {
+        let mode = match h.mode {
+            0 => Mode::Solve,
+            1 => Mode::Check,
+            m => {
+                return Err(Rejection::new(
+                    Status::MalformedRequest,
+                    format!("mode = {m} must be 0 (solve) or 1 (check)"),
+                ));
+            }
+        };
+        let algorithm = *Algorithm::ALL.get(h.algorithm as usize).ok_or_else(|| {
+            Rejection::new(
+                Status::InvalidAlgorithm,
+                format!(
+                    "algorithm = {} is not an algorithm (0 dyfos, 1 dyfos-scipy, 2 brute, 3 random, 4 center)",
+                    h.algorithm
+                ),
+            )
+        })?;
+        let belief =
+            Belief::new(h.mean, h.cov).map_err(|e| Rejection::new(Status::InvalidBelief, format!("belief: {e}")))?;
+        let params = Params::try_from(&h.params)?;
+        if params.model == ModelKind::Learned {
+            return Err(Rejection::new(
+                Status::UnsupportedModel,
+                "params.model = learned needs trained weights, which this daemon has not loaded; use paper or anisotropic",
+            ));
+        }
+        if h.deadline_micros > MAX_DEADLINE_MICROS {
+            return Err(Rejection::new(
+                Status::InvalidDeadline,
+                format!("deadline = {} µs exceeds the limit of {MAX_DEADLINE_MICROS} µs (one hour)", h.deadline_micros),
+            ));
+        }
+        if records.len() > MAX_INLINE_DELTAS {
+            return Err(Rejection::new(
+                Status::OverCapacity,
+                format!(
+                    "{} inline delta records exceed the limit of {MAX_INLINE_DELTAS}; send large changes to the map service first",
+                    records.len()
+                ),
+            ));
+        }
+        let deltas = decode_deltas(records)?;
+        let request = RendezvousRequest {
+            map: h.map_id,
+            expected_version: (h.expected_version != ANY_VERSION).then_some(h.expected_version),
+            belief,
+            deltas,
+            algorithm,
+            seed: h.seed,
+            budget: (h.budget != 0).then_some(h.budget),
+            deadline: (h.deadline_micros != 0).then(|| Duration::from_micros(h.deadline_micros)),
+            params,
+        };
+        Ok((request, mode))
+    }
+}
+
+/// The reply: a status and, on success, the whole answer.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[type_name("dyfos::RendezvousReply")]
+#[repr(C)]
+pub struct RendezvousReply {
+    /// A [`Status`] code.
+    pub status: u32,
+    /// [`Algorithm::ALL`] index of the algorithm used.
+    pub algorithm: u32,
+    /// Why the search stopped: 0 finished, 1 max generations, 2 budget, 3 deadline.
+    pub stop: u32,
+    /// 0 solve, 1 check.
+    pub mode: u32,
+    /// The request's id.
+    pub request_id: u64,
+    /// The map version searched (or checked).
+    pub map_version: u64,
+    /// x = (ρ, ψ, φ, ψ_v).
+    pub x: [f64; 4],
+    /// E = ln det Σ⁺.
+    pub cost: f64,
+    /// p_s.
+    pub sensor_position: [f64; 3],
+    /// R_ws as a quaternion (x, y, z, w), as computed (not sign-canonicalised).
+    pub sensor_quaternion: [f64; 4],
+    /// p_v.
+    pub viewer_position: [f64; 3],
+    /// ψ_v.
+    pub viewer_yaw: f64,
+    /// R, rows.
+    pub r: [[f64; 2]; 2],
+    /// Σ⁺, rows.
+    pub posterior: [[f64; 3]; 3],
+    /// Evaluations: total, workspace, collision, occlusion.
+    pub evaluations: [u64; 4],
+    /// Search time, µs.
+    pub micros: u64,
+    /// Time from receipt to reply in the daemon, µs (queueing included).
+    pub daemon_micros: u64,
+    /// For delta errors, the failing delta's index, else `u64::MAX`.
+    pub error_index: u64,
+    /// What went wrong, for people.
+    pub detail: Detail,
+}
+
+fn stop_code(s: StopReason) -> u32 {
+    match s {
+        StopReason::Finished => 0,
+        StopReason::MaxGenerations => 1,
+        StopReason::Budget => 2,
+        StopReason::Deadline => 3,
+    }
+}
+
+/// The outcome of a check-mode request: everything validated, nothing searched.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RendezvousCheck {
+    /// The version the query would have searched (after the inline deltas).
+    pub map_version: u64,
+}
+
+impl RendezvousReply {
+    /// A success reply carrying `answer`.
+    pub fn answer(request_id: u64, answer: &Answer) -> Self {
+        let q = answer.sensor_orientation.coords; // (i, j, k, w)
+        let e = answer.evaluations;
+        RendezvousReply {
+            status: Status::Ok as u32,
+            algorithm: Algorithm::ALL.iter().position(|a| *a == answer.algorithm).unwrap_or(0) as u32,
+            stop: stop_code(answer.stop),
+            mode: Mode::Solve as u32,
+            request_id,
+            map_version: answer.map_version,
+            x: answer.x.to_array(),
+            cost: answer.cost,
+            sensor_position: answer.sensor_position.coords.into(),
+            sensor_quaternion: [q.x, q.y, q.z, q.w],
+            viewer_position: answer.viewer_position.coords.into(),
+            viewer_yaw: answer.viewer_yaw,
+            r: answer.r,
+            posterior: crate::math::rows3(&answer.posterior),
+            evaluations: [e.total, e.workspace, e.collision, e.occlusion],
+            micros: answer.micros,
+            daemon_micros: 0,
+            error_index: u64::MAX,
+            detail: Detail::default(),
+        }
+    }
+
+    /// A success reply to a check-mode request.
+    pub fn checked(request_id: u64, map_version: u64) -> Self {
+        RendezvousReply {
+            status: Status::Ok as u32,
+            mode: Mode::Check as u32,
+            request_id,
+            map_version,
+            error_index: u64::MAX,
+            ..Default::default()
+        }
+    }
+
+    /// An error reply.
+    pub fn rejected(request_id: u64, rejection: &Rejection) -> Self {
+        RendezvousReply {
+            status: rejection.status as u32,
+            request_id,
+            error_index: rejection.wire_index(),
+            detail: Detail::new(&rejection.message),
+            ..Default::default()
+        }
+    }
+
+    /// Decodes a solve reply: the answer, or the daemon's rejection. Tags from the
+    /// wire are checked, never trusted.
+    pub fn decode_answer(&self) -> Result<Answer, Rejection> {
+        if self.status != Status::Ok as u32 {
+            return Err(Rejection::from_wire(self.status, &self.detail, self.error_index));
+        }
+        let bad = |what: String| Rejection::new(Status::MalformedRequest, format!("malformed reply: {what}"));
+        let algorithm = *Algorithm::ALL
+            .get(self.algorithm as usize)
+            .ok_or_else(|| bad(format!("algorithm = {}", self.algorithm)))?;
+        let stop = match self.stop {
+            0 => StopReason::Finished,
+            1 => StopReason::MaxGenerations,
+            2 => StopReason::Budget,
+            3 => StopReason::Deadline,
+            s => return Err(bad(format!("stop = {s}"))),
+        };
+        let [i, j, k, w] = self.sensor_quaternion;
+        let e = self.evaluations;
+        Ok(Answer {
+            algorithm,
+            // Not `from_array`: re-wrapping the yaw could change its last bit.
+            x: crate::sensor::SensorState { rho: self.x[0], psi: self.x[1], phi: self.x[2], yaw: self.x[3] },
+            cost: self.cost,
+            sensor_position: Point3::from(self.sensor_position),
+            sensor_orientation: UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(w, i, j, k)),
+            viewer_position: Point3::from(self.viewer_position),
+            viewer_yaw: self.viewer_yaw,
+            r: self.r,
+            posterior: Matrix3::from_fn(|r, c| self.posterior[r][c]),
+            evaluations: EvalStats { total: e[0], workspace: e[1], collision: e[2], occlusion: e[3] },
+            micros: self.micros,
+            map_version: self.map_version,
+            stop,
+        })
+    }
+
+    /// Decodes a check reply.
+    pub fn decode_check(&self) -> Result<RendezvousCheck, Rejection> {
+        if self.status != Status::Ok as u32 {
+            return Err(Rejection::from_wire(self.status, &self.detail, self.error_index));
+        }
+        Ok(RendezvousCheck { map_version: self.map_version })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::Sun;
+
+    fn request() -> RendezvousRequest {
+        let belief = Belief::new([1.0, 2.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
+        RendezvousRequest {
+            expected_version: Some(3),
+            deltas: vec![MapDelta::SetSun(Sun::new(0.2, 0.1).unwrap())],
+            algorithm: Algorithm::Center,
+            seed: 11,
+            budget: Some(500),
+            deadline: Some(Duration::from_millis(250)),
+            params: Params { lambda: 2.0, model: ModelKind::Anisotropic, ..Params::default() },
+            ..RendezvousRequest::new(9, belief)
+        }
+    }
+
+    #[test]
+    fn every_field_round_trips() {
+        let r = request();
+        let h = r.header(Mode::Check, 5, [7, 8]);
+        assert_eq!(RendezvousRequest::decode(&h, &r.records()).unwrap(), (r, Mode::Check));
+    }
+
+    #[test]
+    fn every_bad_field_has_its_code() {
+        let r = request();
+        let h = r.header(Mode::Solve, 5, [7, 8]);
+        let status = |h: RendezvousRequestHeader| RendezvousRequest::decode(&h, &[]).unwrap_err().status;
+        let mut cov = h.cov;
+        cov[0][1] = 0.3;
+        let mut not_spd = h.cov;
+        not_spd[2][2] = -1.0;
+        let cases = [
+            (RendezvousRequestHeader { mode: 2, ..h }, Status::MalformedRequest),
+            (RendezvousRequestHeader { algorithm: 5, ..h }, Status::InvalidAlgorithm),
+            (RendezvousRequestHeader { mean: [f64::INFINITY, 0.0, 0.0], ..h }, Status::InvalidBelief),
+            (RendezvousRequestHeader { cov, ..h }, Status::InvalidBelief),
+            (RendezvousRequestHeader { cov: not_spd, ..h }, Status::InvalidBelief),
+            (RendezvousRequestHeader { params: WireParams { rho_min: 9.0, ..h.params }, ..h }, Status::InvalidParams),
+            (
+                RendezvousRequestHeader { params: WireParams { kappa: f64::NAN, ..h.params }, ..h },
+                Status::InvalidParams,
+            ),
+            (RendezvousRequestHeader { params: WireParams { model: 3, ..h.params }, ..h }, Status::InvalidParams),
+            (RendezvousRequestHeader { params: WireParams { model: 2, ..h.params }, ..h }, Status::UnsupportedModel),
+            (RendezvousRequestHeader { deadline_micros: MAX_DEADLINE_MICROS + 1, ..h }, Status::InvalidDeadline),
+        ];
+        for (bad, expected) in cases {
+            assert_eq!(status(bad), expected, "{bad:?}");
+        }
+        let too_many =
+            vec![WireDelta { tag: super::super::map::tag::CLEAR, ..Default::default() }; MAX_INLINE_DELTAS + 1];
+        assert_eq!(RendezvousRequest::decode(&h, &too_many).unwrap_err().status, Status::OverCapacity);
+    }
+
+    #[test]
+    fn replies_round_trip_and_reject_bad_tags() {
+        let rejection = Rejection { status: Status::InvalidDelta, message: "delta #2: no".into(), index: Some(2) };
+        assert_eq!(RendezvousReply::rejected(1, &rejection).decode_answer().unwrap_err(), rejection);
+        let ok = RendezvousReply { stop: 3, algorithm: 2, ..RendezvousReply::checked(1, 4) };
+        let answer = ok.decode_answer().unwrap();
+        assert_eq!((answer.algorithm, answer.stop), (Algorithm::Brute, StopReason::Deadline));
+        assert!(RendezvousReply { stop: 4, ..ok }.decode_answer().is_err());
+        assert!(RendezvousReply { algorithm: 99, ..ok }.decode_answer().is_err());
+        let unknown = RendezvousReply { status: 999, ..ok }.decode_answer().unwrap_err();
+        assert_eq!(unknown.status, Status::MalformedRequest);
+    }
+}

@@ -1,0 +1,163 @@
+//! The health and statistics service (`<prefix>stats`): liveness, uptime, queries
+//! served, errors by code and latency percentiles.
+//!
+//! ```
+//! use dyfos_shared::wire::stats::{DaemonStats, StatsReply};
+//! use dyfos_shared::wire::Status;
+//!
+//! let mut reply = StatsReply::default();
+//! reply.errors_by_code[Status::UnknownMap as usize] = 2;
+//! reply.queries_served = 5;
+//! let stats = DaemonStats::from(&reply);
+//! assert_eq!(stats.errors, vec![(Status::UnknownMap, 2)]);
+//! assert_eq!(stats.queries_served, 5);
+//! ```
+#![allow(unsafe_code)] // SAFETY: only `#[derive(ZeroCopySend)]` below, on `#[repr(C)]` structs of plain numbers.
+
+use super::Status;
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Slots of [`StatsReply::errors_by_code`] (codes beyond are counted in the last).
+pub const STATUS_SLOTS: usize = 32;
+
+/// A stats request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("dyfos::StatsRequest")]
+#[repr(C)]
+pub struct StatsRequest {
+    /// The client's id for this request, echoed in the reply.
+    pub request_id: u64,
+    /// The client's reply listener id ([`super::split_u128`]).
+    pub reply_to: [u64; 2],
+}
+
+/// The daemon's health and counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[type_name("dyfos::StatsReply")]
+#[repr(C)]
+pub struct StatsReply {
+    /// The request's id.
+    pub request_id: u64,
+    /// The daemon's process id.
+    pub pid: u64,
+    /// Time since the daemon started, µs.
+    pub uptime_micros: u64,
+    /// Rendezvous queries answered with a pose.
+    pub queries_served: u64,
+    /// Requests of any service answered with an error.
+    pub requests_failed: u64,
+    /// Map requests answered with success.
+    pub map_requests: u64,
+    /// Maps held.
+    pub maps: u64,
+    /// Queries waiting for a worker.
+    pub queued: u64,
+    /// Queries being searched.
+    pub running: u64,
+    /// Worker threads.
+    pub workers: u64,
+    /// Query latency from receipt to reply over the last queries answered
+    /// (at most 4096), µs: median, 90th and 99th percentile, maximum.
+    pub latency_micros: [u64; 4],
+    /// Queries in that latency window.
+    pub latency_samples: u64,
+    /// Error replies by [`Status`] code.
+    pub errors_by_code: [u64; STATUS_SLOTS],
+}
+
+impl Default for StatsReply {
+    fn default() -> Self {
+        StatsReply {
+            request_id: 0,
+            pid: 0,
+            uptime_micros: 0,
+            queries_served: 0,
+            requests_failed: 0,
+            map_requests: 0,
+            maps: 0,
+            queued: 0,
+            running: 0,
+            workers: 0,
+            latency_micros: [0; 4],
+            latency_samples: 0,
+            errors_by_code: [0; STATUS_SLOTS],
+        }
+    }
+}
+
+/// [`StatsReply`] decoded.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DaemonStats {
+    /// The daemon's process id.
+    pub pid: u64,
+    /// Time since the daemon started.
+    pub uptime: std::time::Duration,
+    /// Rendezvous queries answered with a pose.
+    pub queries_served: u64,
+    /// Requests answered with an error.
+    pub requests_failed: u64,
+    /// Successful map requests.
+    pub map_requests: u64,
+    /// Maps held.
+    pub maps: u64,
+    /// Queries waiting for a worker.
+    pub queued: u64,
+    /// Queries being searched.
+    pub running: u64,
+    /// Worker threads.
+    pub workers: u64,
+    /// Latency median, p90, p99, max, µs (receipt to reply).
+    pub latency_micros: [u64; 4],
+    /// Queries in the latency window.
+    pub latency_samples: u64,
+    /// Non-zero error counts by code.
+    pub errors: Vec<(Status, u64)>,
+}
+
+impl From<&StatsReply> for DaemonStats {
+    fn from(r: &StatsReply) -> Self {
+        let errors = r
+            .errors_by_code
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| **n > 0)
+            .filter_map(|(code, n)| Status::try_from(code as u32).ok().map(|s| (s, *n)))
+            .collect();
+        DaemonStats {
+            pid: r.pid,
+            uptime: std::time::Duration::from_micros(r.uptime_micros),
+            queries_served: r.queries_served,
+            requests_failed: r.requests_failed,
+            map_requests: r.map_requests,
+            maps: r.maps,
+            queued: r.queued,
+            running: r.running,
+            workers: r.workers,
+            latency_micros: r.latency_micros,
+            latency_samples: r.latency_samples,
+            errors,
+        }
+    }
+}
+
+impl DaemonStats {
+    /// As JSON, for `dyfos stats`.
+    pub fn to_json(&self) -> serde_json::Value {
+        let errors: serde_json::Map<String, serde_json::Value> =
+            self.errors.iter().map(|(s, n)| (s.name().to_string(), serde_json::json!(n))).collect();
+        let [p50, p90, p99, max] = self.latency_micros;
+        serde_json::json!({
+            "pid": self.pid,
+            "uptime_s": self.uptime.as_secs_f64(),
+            "queries_served": self.queries_served,
+            "requests_failed": self.requests_failed,
+            "map_requests": self.map_requests,
+            "maps": self.maps,
+            "queued": self.queued,
+            "running": self.running,
+            "workers": self.workers,
+            "latency_us": {"p50": p50, "p90": p90, "p99": p99, "max": max, "samples": self.latency_samples},
+            "errors": errors,
+        })
+    }
+}
