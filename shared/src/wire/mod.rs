@@ -30,6 +30,7 @@
 #![allow(unsafe_code)] // SAFETY: only `#[derive(ZeroCopySend)]` in this module tree, on `#[repr(C)]` structs of plain numbers.
 
 pub mod map;
+pub mod mission;
 pub mod rendezvous;
 pub mod stats;
 
