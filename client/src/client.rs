@@ -524,7 +524,6 @@ mod tests {
         let config = ClientConfig {
             prefix: format!("dyfos-client-unit-{}/", std::process::id()),
             connect_timeout: Duration::from_millis(50),
-            domain: Some(format!("dyfu{}_", std::process::id())),
             ..ClientConfig::default()
         };
         let err = Client::connect(&config).unwrap_err();

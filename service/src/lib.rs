@@ -14,8 +14,10 @@
 //! println!("fly the viewer to {} (E = {:.3})", answer.viewer_position, answer.cost);
 //! ```
 
+pub mod daemon;
 pub mod lupp;
 pub mod search;
+pub mod store;
 
 use dyfos_shared::answer::{Algorithm, Answer, EvalStats, StopReason};
 use dyfos_shared::params::Params;

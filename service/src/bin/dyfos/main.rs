@@ -5,6 +5,7 @@
 //! feasible pose, 1 anything else.
 
 mod offline;
+mod online;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -23,6 +24,13 @@ enum Command {
     Solve(offline::SolveArgs),
     /// Evaluate one candidate x = (ρ, ψ, φ, ψ_v) of a scenario and print the verdict as JSON.
     Eval(offline::EvalArgs),
+    /// Ask a running dyfosd: upload the scenario's map, query its rover, print the answer as `solve` does.
+    Query(online::QueryArgs),
+    /// Create, upload, change, print or delete a map held by dyfosd.
+    #[command(subcommand)]
+    Map(online::MapCommand),
+    /// Print dyfosd's health and counters as JSON.
+    Stats(online::StatsArgs),
 }
 
 /// An error with the exit code it deserves.
@@ -66,6 +74,9 @@ fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Solve(args) => offline::solve(&args),
         Command::Eval(args) => offline::eval(&args),
+        Command::Query(args) => online::query(&args),
+        Command::Map(command) => online::map(&command),
+        Command::Stats(args) => online::stats(&args),
     }
 }
 

@@ -39,7 +39,7 @@ pub struct EvalArgs {
     pub x: Vec<f64>,
 }
 
-fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
+pub fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
     Algorithm::from_name(s).ok_or_else(|| {
         let names: Vec<_> = Algorithm::ALL.iter().map(|a| a.name()).collect();
         format!("unknown algorithm `{s}`; choose one of {}", names.join(", "))

@@ -1,0 +1,289 @@
+//! `dyfos query`, `dyfos map …` and `dyfos stats`: the same work as the offline
+//! commands, asked of a running `dyfosd` through the client library.
+
+use crate::Failure;
+use crate::offline::{load_scenario, parse_algorithm};
+use anyhow::anyhow;
+use dyfos_client::prelude::*;
+use dyfos_client::{MapRequestError, RendezvousError};
+use dyfos_shared::world::{AxisBox, VerticalCylinder};
+use std::path::PathBuf;
+use std::time::Duration;
+
+/// How to reach the daemon (shared by every online command).
+#[derive(Debug, Clone, clap::Args)]
+pub struct DaemonArgs {
+    /// Service-name prefix of the daemon (its `--prefix`).
+    #[arg(long, default_value = dyfos_client::DEFAULT_PREFIX)]
+    pub prefix: String,
+    /// iceoryx2 domain of the daemon (its `--domain`).
+    #[arg(long)]
+    pub domain: Option<String>,
+    /// Seconds to wait for the daemon's reply.
+    #[arg(long, default_value_t = 60.0)]
+    pub timeout: f64,
+}
+
+impl DaemonArgs {
+    fn timeout(&self) -> Result<Duration, Failure> {
+        Duration::try_from_secs_f64(self.timeout)
+            .map_err(|_| Failure::invalid(anyhow!("--timeout {} is not a number of seconds", self.timeout)))
+    }
+
+    fn connect(&self) -> Result<Client, Failure> {
+        let config =
+            ClientConfig { prefix: self.prefix.clone(), domain: self.domain.clone(), ..ClientConfig::default() };
+        Client::connect(&config).map_err(|e| Failure::from(anyhow!(e)))
+    }
+}
+
+/// Flags of `dyfos query`.
+#[derive(Debug, clap::Args)]
+pub struct QueryArgs {
+    /// Scenario file (SPEC §11 JSON): its map is uploaded, its rover queried.
+    pub scenario: PathBuf,
+    /// Search algorithm.
+    #[arg(long, default_value = "dyfos", value_parser = parse_algorithm)]
+    pub algo: Algorithm,
+    /// Seed of the random stream: the same seed gives the same answer as `dyfos solve`.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Most candidates to evaluate (default: the algorithm's own limits).
+    #[arg(long)]
+    pub budget: Option<u64>,
+    /// Milliseconds the daemon may search before answering with its best so far.
+    #[arg(long)]
+    pub deadline_ms: Option<u64>,
+    /// Map id to upload to (default: derived from the map's content, so the same
+    /// scenario reuses its map).
+    #[arg(long)]
+    pub map: Option<MapId>,
+    /// Replace the map if it exists with other content.
+    #[arg(long)]
+    pub replace: bool,
+    #[command(flatten)]
+    pub daemon: DaemonArgs,
+}
+
+/// `dyfos map` subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum MapCommand {
+    /// Create an empty map.
+    Create {
+        /// Map id.
+        id: MapId,
+        /// Bounds: X_MIN Y_MIN X_MAX Y_MAX.
+        #[arg(long, num_args = 4, allow_negative_numbers = true, required = true)]
+        bounds: Vec<f64>,
+        /// Sun: ELEVATION AZIMUTH (rad).
+        #[arg(long, num_args = 2, allow_negative_numbers = true, required = true)]
+        sun: Vec<f64>,
+        #[command(flatten)]
+        daemon: DaemonArgs,
+    },
+    /// Upload a scenario file's map (bounds, sun, obstacles, voxels).
+    Upload {
+        /// Map id.
+        id: MapId,
+        /// Scenario file.
+        scenario: PathBuf,
+        /// Replace an existing map.
+        #[arg(long)]
+        replace: bool,
+        #[command(flatten)]
+        daemon: DaemonArgs,
+    },
+    /// Apply a JSON array of map deltas atomically, e.g.
+    /// `[{"RemoveObstacle": {"id": 3}}, {"SetSun": {"elevation": 0.5, "azimuth": 1.0}}]`.
+    Apply {
+        /// Map id.
+        id: MapId,
+        /// JSON file with the deltas.
+        deltas: PathBuf,
+        /// Fail unless the map is at this version.
+        #[arg(long)]
+        expected_version: Option<u64>,
+        #[command(flatten)]
+        daemon: DaemonArgs,
+    },
+    /// Print a map as JSON.
+    Snapshot {
+        /// Map id.
+        id: MapId,
+        #[command(flatten)]
+        daemon: DaemonArgs,
+    },
+    /// Delete a map.
+    Delete {
+        /// Map id.
+        id: MapId,
+        /// Fail unless the map is at this version.
+        #[arg(long)]
+        expected_version: Option<u64>,
+        #[command(flatten)]
+        daemon: DaemonArgs,
+    },
+}
+
+/// Flags of `dyfos stats`.
+#[derive(Debug, clap::Args)]
+pub struct StatsArgs {
+    #[command(flatten)]
+    pub daemon: DaemonArgs,
+}
+
+/// A daemon error with its exit code: bad input 2, no feasible pose 3, else 1.
+fn failure(status: Option<Status>, error: impl Into<anyhow::Error>) -> Failure {
+    match status {
+        Some(Status::NoFeasiblePose | Status::DeadlineExceeded) => Failure::infeasible(error),
+        Some(
+            Status::MalformedRequest
+            | Status::InvalidAlgorithm
+            | Status::InvalidBelief
+            | Status::InvalidParams
+            | Status::UnsupportedModel
+            | Status::InvalidDeadline
+            | Status::MalformedDelta
+            | Status::InvalidDelta
+            | Status::UnknownMap
+            | Status::MapVersionMismatch
+            | Status::MapExists
+            | Status::OverCapacity,
+        ) => Failure::invalid(error),
+        _ => Failure::from(error.into()),
+    }
+}
+
+fn map_failure(e: MapRequestError) -> Failure {
+    failure(e.status(), e)
+}
+
+fn rendezvous_failure(e: RendezvousError) -> Failure {
+    failure(e.status(), e)
+}
+
+/// A map id from the content: the same map gets the same id.
+fn content_id(world: &World) -> MapId {
+    let text = format!(
+        "{:?}{:?}{:?}{:?}",
+        world.bounds(),
+        world.sun(),
+        world.obstacles(),
+        world.voxels().map(|v| { (v.resolution(), v.origin(), v.occupied().copied().collect::<Vec<_>>()) })
+    );
+    // FNV-1a, 64 bit.
+    text.bytes().fold(0xcbf29ce484222325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100000001b3))
+}
+
+fn same_content(a: &World, b: &World) -> bool {
+    a.bounds() == b.bounds() && a.sun() == b.sun() && a.obstacles() == b.obstacles() && a.voxels() == b.voxels()
+}
+
+/// `dyfos query`.
+pub fn query(args: &QueryArgs) -> Result<(), Failure> {
+    let scenario = load_scenario(&args.scenario)?;
+    let timeout = args.daemon.timeout()?;
+    let mut client = args.daemon.connect()?;
+    let map = args.map.unwrap_or_else(|| content_id(&scenario.world));
+    let version = match client.upload_map(map, &scenario.world, false, timeout) {
+        Ok(v) => v,
+        Err(e) if e.status() == Some(Status::MapExists) => {
+            let existing = client.snapshot(map, timeout).map_err(map_failure)?;
+            if same_content(&existing, &scenario.world) {
+                existing.version()
+            } else if args.replace {
+                client.upload_map(map, &scenario.world, true, timeout).map_err(map_failure)?
+            } else {
+                return Err(Failure::invalid(anyhow!(
+                    "map {map} exists in the daemon with other content; pass --replace to overwrite it, or --map with another id"
+                )));
+            }
+        }
+        Err(e) => return Err(map_failure(e)),
+    };
+    let request = RendezvousRequest {
+        expected_version: Some(version),
+        algorithm: args.algo,
+        seed: args.seed,
+        budget: args.budget,
+        deadline: args.deadline_ms.map(Duration::from_millis),
+        params: scenario.params,
+        ..RendezvousRequest::new(map, scenario.belief)
+    };
+    let answer = client.rendezvous(&request, timeout).map_err(rendezvous_failure)?;
+    crate::print_json(&answer.to_json());
+    Ok(())
+}
+
+fn world_json(id: MapId, world: &World) -> serde_json::Value {
+    let obstacles: Vec<serde_json::Value> = world
+        .obstacles()
+        .iter()
+        .map(|(id, o)| match o {
+            Obstacle::Cylinder(VerticalCylinder { center, radius, height }) => serde_json::json!({
+                "id": id, "cylinder": {"x": center.x, "y": center.y, "radius": radius, "height": height}
+            }),
+            Obstacle::Box(AxisBox { min, max }) => serde_json::json!({
+                "id": id, "box": {"min": <[f64; 3]>::from(min.coords), "max": <[f64; 3]>::from(max.coords)}
+            }),
+        })
+        .collect();
+    let mut out = serde_json::json!({
+        "map": id,
+        "version": world.version(),
+        "bounds": world.bounds().to_array(),
+        "sun": {"elevation": world.sun().elevation, "azimuth": world.sun().azimuth},
+        "obstacles": obstacles,
+    });
+    if let Some(v) = world.voxels() {
+        out["voxels"] = serde_json::json!({
+            "resolution": v.resolution(),
+            "origin": <[f64; 3]>::from(v.origin().coords),
+            "occupied": v.occupied().collect::<Vec<_>>(),
+        });
+    }
+    out
+}
+
+/// `dyfos map …`.
+pub fn map(command: &MapCommand) -> Result<(), Failure> {
+    match command {
+        MapCommand::Create { id, bounds, sun, daemon } => {
+            let b = Bounds::new([bounds[0], bounds[1], bounds[2], bounds[3]]).map_err(Failure::invalid)?;
+            let s = Sun::new(sun[0], sun[1]).map_err(Failure::invalid)?;
+            let version = daemon.connect()?.create_map(*id, b, s, daemon.timeout()?).map_err(map_failure)?;
+            crate::print_json(&serde_json::json!({"map": id, "version": version}));
+        }
+        MapCommand::Upload { id, scenario, replace, daemon } => {
+            let scenario = load_scenario(scenario)?;
+            let version =
+                daemon.connect()?.upload_map(*id, &scenario.world, *replace, daemon.timeout()?).map_err(map_failure)?;
+            crate::print_json(&serde_json::json!({"map": id, "version": version}));
+        }
+        MapCommand::Apply { id, deltas, expected_version, daemon } => {
+            let text = std::fs::read_to_string(deltas)
+                .map_err(|e| Failure::invalid(anyhow!("cannot read {}: {e}", deltas.display())))?;
+            let batch: Vec<MapDelta> = serde_json::from_str(&text)
+                .map_err(|e| Failure::invalid(anyhow!("{}: not a JSON array of map deltas: {e}", deltas.display())))?;
+            let version =
+                daemon.connect()?.apply(*id, *expected_version, &batch, daemon.timeout()?).map_err(map_failure)?;
+            crate::print_json(&serde_json::json!({"map": id, "version": version}));
+        }
+        MapCommand::Snapshot { id, daemon } => {
+            let world = daemon.connect()?.snapshot(*id, daemon.timeout()?).map_err(map_failure)?;
+            crate::print_json(&world_json(*id, &world));
+        }
+        MapCommand::Delete { id, expected_version, daemon } => {
+            daemon.connect()?.delete_map(*id, *expected_version, daemon.timeout()?).map_err(map_failure)?;
+            crate::print_json(&serde_json::json!({"map": id, "deleted": true}));
+        }
+    }
+    Ok(())
+}
+
+/// `dyfos stats`.
+pub fn stats(args: &StatsArgs) -> Result<(), Failure> {
+    let stats = args.daemon.connect()?.stats(args.daemon.timeout()?).map_err(|e| Failure::from(anyhow!(e)))?;
+    crate::print_json(&stats.to_json());
+    Ok(())
+}

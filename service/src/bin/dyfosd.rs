@@ -1,0 +1,144 @@
+//! `dyfosd`: the DyFOS optimizer daemon. Robot processes on this computer query it
+//! over iceoryx2 shared memory (see `dyfos_client`).
+//!
+//! Configuration: flags, over an optional TOML file (`--config`), over defaults.
+//! Logs go to stderr through `tracing`; `RUST_LOG` filters them (default `info`),
+//! iceoryx2's own log included (`IOX2_LOG_LEVEL`, default warn).
+//!
+//! Exit codes: 0 after SIGINT/SIGTERM once the queries in flight are answered;
+//! 2 for a bad flag or configuration; 1 if the daemon cannot start.
+
+use anyhow::Context;
+use clap::Parser;
+use dyfos_service::daemon::{Daemon, DaemonConfig, WaitOutcome};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// The DyFOS optimizer daemon: answers rendezvous queries from robot processes.
+#[derive(Debug, Parser)]
+#[command(name = "dyfosd", version, about, long_about = None)]
+struct Cli {
+    /// Service-name prefix; clients must use the same (default `dyfos/`).
+    #[arg(long)]
+    prefix: Option<String>,
+    /// Directory where maps are persisted (default `$XDG_STATE_HOME/dyfos` or `~/.local/state/dyfos`).
+    #[arg(long)]
+    state_dir: Option<PathBuf>,
+    /// TOML file with any of: prefix, state_dir, domain, workers, spin_us,
+    /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// iceoryx2 file prefix: only processes of the same domain see each other (default iceoryx2's `iox2_`).
+    #[arg(long)]
+    domain: Option<String>,
+    /// Search worker threads (default: one per core, at least 2).
+    #[arg(long)]
+    workers: Option<usize>,
+    /// Microseconds to keep polling after a request before sleeping (default 200).
+    #[arg(long)]
+    spin_us: Option<u64>,
+    /// Most client connections per service (default 64).
+    #[arg(long)]
+    max_clients: Option<usize>,
+    /// Most queries waiting for a worker before `busy` (default 256).
+    #[arg(long)]
+    max_queued: Option<usize>,
+}
+
+/// The TOML file's keys; each is optional and a flag overrides it.
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FileConfig {
+    prefix: Option<String>,
+    state_dir: Option<PathBuf>,
+    domain: Option<String>,
+    workers: Option<usize>,
+    spin_us: Option<u64>,
+    max_clients: Option<usize>,
+    max_requests_per_client: Option<usize>,
+    max_queued: Option<usize>,
+    upload_idle_timeout_s: Option<u64>,
+}
+
+fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
+    let file = match &cli.config {
+        None => FileConfig::default(),
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+            toml::from_str(&text).with_context(|| format!("{}", path.display()))?
+        }
+    };
+    let d = DaemonConfig::default();
+    Ok(DaemonConfig {
+        prefix: cli.prefix.clone().or(file.prefix).unwrap_or(d.prefix),
+        domain: cli.domain.clone().or(file.domain).or(d.domain),
+        state_dir: cli.state_dir.clone().or(file.state_dir).unwrap_or(d.state_dir),
+        workers: cli.workers.or(file.workers).unwrap_or(d.workers),
+        spin: cli.spin_us.or(file.spin_us).map_or(d.spin, Duration::from_micros),
+        max_clients: cli.max_clients.or(file.max_clients).unwrap_or(d.max_clients),
+        max_requests_per_client: file.max_requests_per_client.unwrap_or(d.max_requests_per_client),
+        max_queued: cli.max_queued.or(file.max_queued).unwrap_or(d.max_queued),
+        upload_idle_timeout: file.upload_idle_timeout_s.map_or(d.upload_idle_timeout, Duration::from_secs),
+    })
+}
+
+fn init_logging() {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+}
+
+/// Serves until SIGINT/SIGTERM: answer, keep polling for `config.spin` after the
+/// last request (the next one of a burst then costs no wake-up), then sleep.
+fn serve(mut daemon: Daemon) {
+    let spin = daemon.config().spin;
+    let mut last_work = Instant::now();
+    let mut rounds: u32 = 0;
+    loop {
+        rounds = rounds.wrapping_add(1);
+        if daemon.spin() > 0 {
+            last_work = Instant::now();
+            if rounds.is_multiple_of(64) && daemon.termination_requested() {
+                break;
+            }
+            continue;
+        }
+        if last_work.elapsed() < spin {
+            if daemon.termination_requested() {
+                break;
+            }
+            std::hint::spin_loop();
+            continue;
+        }
+        match daemon.wait(Duration::from_secs(1)) {
+            WaitOutcome::Terminate => break,
+            WaitOutcome::Work => last_work = Instant::now(),
+            WaitOutcome::Idle => {}
+        }
+    }
+    daemon.shutdown();
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_logging();
+    let config = match config(&cli) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("dyfosd: {e:#}");
+            return ExitCode::from(2);
+        }
+    };
+    match Daemon::create(&config) {
+        Ok(daemon) => {
+            serve(daemon);
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("dyfosd: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

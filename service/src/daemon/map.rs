@@ -1,0 +1,431 @@
+//! The map service and the maps themselves: create, apply, chunked upload,
+//! paged snapshot, delete. Every accepted change is written to the store before
+//! it is visible; a failed write leaves the map as it was.
+
+use super::{Daemon, Ipc};
+use crate::store::Store;
+use dyfos_shared::limits::{MAX_MAPS, MAX_PENDING_UPLOADS};
+use dyfos_shared::wire::map::{
+    MapId, MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, world_chunks, world_from_content,
+};
+use dyfos_shared::wire::{Detail, Rejection, Status, join_u128};
+use dyfos_shared::world::{Bounds, MapDelta, MapDeltaError, Sun, World};
+use iceoryx2::active_request::ActiveRequest;
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tracing::{debug, info, warn};
+
+type MapActive = ActiveRequest<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapReplyHeader>;
+
+/// Abandoned uploads remembered, so their late chunks get `chunk_incomplete`.
+const ABANDONED_MEMORY: usize = 64;
+
+pub(crate) fn unknown_map(id: MapId) -> Rejection {
+    Rejection::new(
+        Status::UnknownMap,
+        format!("no map {id}; create it (`dyfos map create`, Client::create_map) or upload it first"),
+    )
+}
+
+pub(crate) fn check_version(id: MapId, world: &World, expected: Option<u64>) -> Result<(), Rejection> {
+    match expected {
+        Some(v) if v != world.version() => Err(Rejection::new(
+            Status::MapVersionMismatch,
+            format!(
+                "map {id} is at version {}, the request expected {v}; read the map again and retry",
+                world.version()
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+pub(crate) fn invalid_delta(e: MapDeltaError) -> Rejection {
+    Rejection {
+        status: Status::InvalidDelta,
+        message: format!("{e}; nothing was applied"),
+        index: Some(e.index as u64),
+    }
+}
+
+/// A map's snapshot pages, each a self-contained chunk of records.
+type Pages = Arc<Vec<Vec<WireDelta>>>;
+
+/// An upload in progress.
+struct Upload {
+    upload_id: u64,
+    chunk_count: u32,
+    next: u32,
+    replace: bool,
+    expected_version: Option<u64>,
+    bounds: Bounds,
+    sun: Sun,
+    deltas: Vec<MapDelta>,
+    last_chunk: Instant,
+}
+
+/// The maps, their store, uploads in progress and the last snapshot's pages.
+pub(crate) struct Maps {
+    maps: BTreeMap<MapId, Arc<World>>,
+    store: Store,
+    uploads: BTreeMap<MapId, Upload>,
+    abandoned: VecDeque<(MapId, u64)>,
+    pages: Option<(MapId, u64, Pages)>,
+    upload_idle_timeout: Duration,
+}
+
+impl Maps {
+    pub(crate) fn new(
+        store: Store,
+        maps: impl IntoIterator<Item = (MapId, World)>,
+        upload_idle_timeout: Duration,
+    ) -> Self {
+        Maps {
+            maps: maps.into_iter().map(|(id, w)| (id, Arc::new(w))).collect(),
+            store,
+            uploads: BTreeMap::new(),
+            abandoned: VecDeque::new(),
+            pages: None,
+            upload_idle_timeout,
+        }
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.maps.len()
+    }
+
+    pub(crate) fn iter(&self) -> impl Iterator<Item = (MapId, &World)> {
+        self.maps.iter().map(|(id, w)| (*id, w.as_ref()))
+    }
+
+    pub(crate) fn get(&self, id: MapId) -> Option<Arc<World>> {
+        self.maps.get(&id).cloned()
+    }
+
+    /// Persists `world` as map `id`, then makes it current.
+    pub(crate) fn commit(&mut self, id: MapId, world: World, what: &str) -> Result<Arc<World>, Rejection> {
+        if !self.maps.contains_key(&id) && self.maps.len() >= MAX_MAPS {
+            return Err(Rejection::new(
+                Status::OverCapacity,
+                format!("the daemon holds {MAX_MAPS} maps, its limit; delete one first"),
+            ));
+        }
+        if let Err(e) = self.store.save(id, &world) {
+            warn!(map = id, "could not persist map: {e}");
+            return Err(Rejection::new(
+                Status::StorageFailed,
+                format!("could not write map {id} to the state directory ({e}); the map is unchanged"),
+            ));
+        }
+        info!(map = id, version = world.version(), "map changed: {what}");
+        let world = Arc::new(world);
+        self.maps.insert(id, Arc::clone(&world));
+        Ok(world)
+    }
+
+    fn abandon(&mut self, map: MapId, upload: &Upload, why: &str) {
+        warn!(
+            map,
+            upload_id = upload.upload_id,
+            received = upload.next,
+            of = upload.chunk_count,
+            "upload abandoned: {why}"
+        );
+        if self.abandoned.len() == ABANDONED_MEMORY {
+            self.abandoned.pop_front();
+        }
+        self.abandoned.push_back((map, upload.upload_id));
+    }
+
+    /// Abandons uploads idle for longer than the timeout.
+    pub(crate) fn expire_uploads(&mut self) {
+        let timeout = self.upload_idle_timeout;
+        let stale: Vec<MapId> =
+            self.uploads.iter().filter(|(_, u)| u.last_chunk.elapsed() > timeout).map(|(id, _)| *id).collect();
+        for id in stale {
+            if let Some(u) = self.uploads.remove(&id) {
+                self.abandon(id, &u, "no chunk for too long");
+            }
+        }
+    }
+
+    fn incomplete_or_out_of_order(&self, map: MapId, upload_id: u64, chunk_index: u32) -> Rejection {
+        if self.abandoned.contains(&(map, upload_id)) {
+            Rejection::new(
+                Status::ChunkIncomplete,
+                format!(
+                    "upload {upload_id} of map {map} was abandoned before it completed (superseded or idle); start again from chunk 0"
+                ),
+            )
+        } else {
+            Rejection::new(
+                Status::ChunkOutOfOrder,
+                format!(
+                    "chunk {chunk_index} of upload {upload_id}: no such upload of map {map} in progress; start with chunk 0"
+                ),
+            )
+        }
+    }
+
+    /// One upload chunk. Returns the map's version (the new one when complete).
+    #[allow(clippy::too_many_arguments)]
+    fn upload(
+        &mut self,
+        map: MapId,
+        upload_id: u64,
+        chunk_index: u32,
+        chunk_count: u32,
+        replace: bool,
+        expected_version: Option<u64>,
+        bounds: Bounds,
+        sun: Sun,
+        deltas: Vec<MapDelta>,
+    ) -> Result<u64, Rejection> {
+        match self.uploads.get_mut(&map) {
+            Some(u) if u.upload_id == upload_id => {
+                if chunk_count != u.chunk_count {
+                    return Err(Rejection::new(
+                        Status::MalformedRequest,
+                        format!(
+                            "chunk_count = {chunk_count} differs from the {} this upload began with",
+                            u.chunk_count
+                        ),
+                    ));
+                }
+                if chunk_index < u.next {
+                    return Err(Rejection::new(
+                        Status::ChunkDuplicate,
+                        format!(
+                            "chunk {chunk_index} of upload {upload_id} was already received; send chunk {} next",
+                            u.next
+                        ),
+                    ));
+                }
+                if chunk_index > u.next {
+                    return Err(Rejection::new(
+                        Status::ChunkOutOfOrder,
+                        format!(
+                            "chunk {chunk_index} of upload {upload_id} arrived before chunk {}; send chunk {} next",
+                            u.next, u.next
+                        ),
+                    ));
+                }
+                u.deltas.extend(deltas);
+                u.next += 1;
+                u.last_chunk = Instant::now();
+            }
+            Some(_) if chunk_index == 0 => {
+                let old = self.uploads.remove(&map).expect("present");
+                self.abandon(map, &old, "superseded by a new upload of the same map");
+                self.start_upload(map, upload_id, chunk_count, replace, expected_version, bounds, sun, deltas)?;
+            }
+            Some(_) => return Err(self.incomplete_or_out_of_order(map, upload_id, chunk_index)),
+            None if chunk_index == 0 => {
+                self.start_upload(map, upload_id, chunk_count, replace, expected_version, bounds, sun, deltas)?;
+            }
+            None => return Err(self.incomplete_or_out_of_order(map, upload_id, chunk_index)),
+        }
+        let u = self.uploads.get(&map).expect("upload in progress");
+        if u.next < u.chunk_count {
+            return Ok(self.maps.get(&map).map_or(0, |w| w.version()));
+        }
+        let u = self.uploads.remove(&map).expect("upload in progress");
+        let current = self.maps.get(&map).cloned();
+        let version = match &current {
+            Some(_) if !u.replace => {
+                return Err(Rejection::new(
+                    Status::MapExists,
+                    format!("map {map} exists; upload with replace (`--replace`) to overwrite it, or pick another id"),
+                ));
+            }
+            Some(w) => {
+                check_version(map, w, u.expected_version)?;
+                w.version() + 1
+            }
+            None => 0,
+        };
+        let world = world_from_content(version, u.bounds, u.sun, &u.deltas).map_err(invalid_delta)?;
+        let what = format!("uploaded ({} chunks)", u.chunk_count);
+        Ok(self.commit(map, world, &what)?.version())
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn start_upload(
+        &mut self,
+        map: MapId,
+        upload_id: u64,
+        chunk_count: u32,
+        replace: bool,
+        expected_version: Option<u64>,
+        bounds: Bounds,
+        sun: Sun,
+        deltas: Vec<MapDelta>,
+    ) -> Result<(), Rejection> {
+        if self.uploads.len() >= MAX_PENDING_UPLOADS {
+            return Err(Rejection::new(
+                Status::OverCapacity,
+                format!("{MAX_PENDING_UPLOADS} uploads are in progress, the limit; retry when one completes"),
+            ));
+        }
+        self.uploads.insert(
+            map,
+            Upload {
+                upload_id,
+                chunk_count,
+                next: 1,
+                replace,
+                expected_version,
+                bounds,
+                sun,
+                deltas,
+                last_chunk: Instant::now(),
+            },
+        );
+        Ok(())
+    }
+
+    /// The pages of map `id` at its current version (cached for the last map paged).
+    fn pages(&mut self, id: MapId, world: &World) -> Arc<Vec<Vec<WireDelta>>> {
+        match &self.pages {
+            Some((m, v, pages)) if *m == id && *v == world.version() => Arc::clone(pages),
+            _ => {
+                let pages = Arc::new(world_chunks(world));
+                self.pages = Some((id, world.version(), Arc::clone(&pages)));
+                pages
+            }
+        }
+    }
+}
+
+/// The reply to a map request, with the records to send.
+struct Reply {
+    header: MapReplyHeader,
+    records: Option<(Arc<Vec<Vec<WireDelta>>>, usize)>,
+}
+
+fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> {
+    let ok = |map: MapId, version: u64| Reply {
+        header: MapReplyHeader { map_id: map, version, error_index: u64::MAX, ..Default::default() },
+        records: None,
+    };
+    let maps = &mut daemon.maps;
+    match request {
+        MapRequest::Create { map, bounds, sun } => {
+            if maps.get(map).is_some() {
+                return Err(Rejection::new(
+                    Status::MapExists,
+                    format!("map {map} exists; pick another id or delete it first"),
+                ));
+            }
+            let world = maps.commit(map, World::empty(bounds, sun), "created")?;
+            Ok(ok(map, world.version()))
+        }
+        MapRequest::Apply { map, expected_version, deltas } => {
+            let world = maps.get(map).ok_or_else(|| unknown_map(map))?;
+            check_version(map, &world, expected_version)?;
+            let next = world.apply(&deltas).map_err(invalid_delta)?;
+            let what = format!("{} deltas applied", deltas.len());
+            Ok(ok(map, maps.commit(map, next, &what)?.version()))
+        }
+        MapRequest::Upload {
+            map,
+            upload_id,
+            chunk_index,
+            chunk_count,
+            replace,
+            expected_version,
+            bounds,
+            sun,
+            deltas,
+        } => {
+            let version =
+                maps.upload(map, upload_id, chunk_index, chunk_count, replace, expected_version, bounds, sun, deltas)?;
+            let mut reply = ok(map, version);
+            reply.header.chunk_index = chunk_index;
+            reply.header.chunk_count = chunk_count;
+            Ok(reply)
+        }
+        MapRequest::Snapshot { map, page } => {
+            let world = maps.get(map).ok_or_else(|| unknown_map(map))?;
+            let pages = maps.pages(map, &world);
+            let count = pages.len() as u32;
+            if page >= count {
+                return Err(Rejection::new(
+                    Status::ChunkOutOfOrder,
+                    format!(
+                        "map {map} at version {} has {count} snapshot pages; page {page} does not exist",
+                        world.version()
+                    ),
+                ));
+            }
+            let mut reply = ok(map, world.version());
+            reply.header.chunk_index = page;
+            reply.header.chunk_count = count;
+            reply.header.bounds = world.bounds().to_array();
+            reply.header.sun = [world.sun().elevation, world.sun().azimuth];
+            reply.records = Some((pages, page as usize));
+            Ok(reply)
+        }
+        MapRequest::Delete { map, expected_version } => {
+            let world = maps.get(map).ok_or_else(|| unknown_map(map))?;
+            check_version(map, &world, expected_version)?;
+            maps.store.remove(map).map_err(|e| {
+                Rejection::new(
+                    Status::StorageFailed,
+                    format!("could not remove map {map}'s file ({e}); the map is unchanged"),
+                )
+            })?;
+            maps.maps.remove(&map);
+            info!(map, version = world.version(), "map deleted");
+            Ok(ok(map, world.version()))
+        }
+    }
+}
+
+pub(super) fn on_request(daemon: &mut Daemon, active: MapActive) {
+    let header = *active.user_header();
+    let reply_to = join_u128(header.reply_to);
+    let result = MapRequest::decode(&header, active.payload()).and_then(|request| handle(daemon, request));
+    let reply = match result {
+        Ok(reply) => {
+            if let Ok(mut s) = daemon.shared.stats.lock() {
+                s.map_ok();
+            }
+            reply
+        }
+        Err(rejection) => {
+            debug!(request_id = header.request_id, map = header.map_id, status = %rejection.status, "map request rejected: {}", rejection.message);
+            if let Ok(mut s) = daemon.shared.stats.lock() {
+                s.failed(rejection.status);
+            }
+            Reply {
+                header: MapReplyHeader {
+                    status: rejection.status as u32,
+                    map_id: header.map_id,
+                    version: daemon.maps.get(header.map_id).map_or(0, |w| w.version()),
+                    error_index: rejection.wire_index(),
+                    detail: Detail::new(&rejection.message),
+                    ..Default::default()
+                },
+                records: None,
+            }
+        }
+    };
+    let mut reply_header = reply.header;
+    reply_header.request_id = header.request_id;
+    let records: &[WireDelta] = match &reply.records {
+        Some((pages, i)) => &pages[*i],
+        None => &[],
+    };
+    match active.loan_slice_uninit(records.len()) {
+        Ok(mut loan) => {
+            *loan.user_header_mut() = reply_header;
+            if let Err(e) = loan.write_from_slice(records).send() {
+                debug!("map reply not delivered (client gone?): {e:?}");
+            }
+        }
+        Err(e) => warn!("map reply not delivered: {e:?}"),
+    }
+    daemon.shared.notify(reply_to);
+}

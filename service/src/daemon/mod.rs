@@ -1,0 +1,495 @@
+//! The optimizer daemon behind `dyfosd`: iceoryx2 services under one prefix, a
+//! worker pool for the searches, maps persisted in a state directory.
+//!
+//! [`Daemon::create`] opens every port (creating the services with the daemon's own
+//! limits); [`Daemon::spin`] answers whatever is pending and returns at once;
+//! [`Daemon::wait`] sleeps until a client sends something; [`Daemon::shutdown`]
+//! finishes the queries in flight. `dyfosd` owns the loop around them.
+//!
+//! ```no_run
+//! use dyfos_service::daemon::{Daemon, DaemonConfig, WaitOutcome};
+//! use std::time::Duration;
+//!
+//! let mut daemon = Daemon::create(&DaemonConfig::default())?;
+//! loop {
+//!     daemon.spin();
+//!     if daemon.wait(Duration::from_secs(1)) == WaitOutcome::Terminate {
+//!         break;
+//!     }
+//! }
+//! daemon.shutdown();
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! Threading: one IPC thread (the caller's) owns the maps, validates every request,
+//! applies map changes and answers map and stats requests itself. Searches go to a
+//! pool of worker threads, which reply to the client directly (the ports are the
+//! thread-safe iceoryx2 variant, so an accepted request can move to a worker). A
+//! `brute` query may hold at most all workers but one, so a cheap query from another
+//! client always finds a free worker.
+
+mod map;
+mod rendezvous;
+mod stats;
+
+use crate::store::{Store, StoreOpenError};
+use dyfos_shared::limits::MAX_MAPS;
+use dyfos_shared::wire::map::{MapReplyHeader, MapRequestHeader, WireDelta};
+use dyfos_shared::wire::rendezvous::{RendezvousReply, RendezvousRequestHeader};
+use dyfos_shared::wire::stats::{StatsReply, StatsRequest};
+use dyfos_shared::wire::{DEFAULT_PREFIX, PrefixError, ServiceNames};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::server::Server;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use std::path::PathBuf;
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use tracing::{debug, info, warn};
+
+/// The iceoryx2 service variant of the daemon's ports: thread-safe, so accepted
+/// requests can move to worker threads. Shares memory with `ipc::Service` peers.
+pub type Ipc = ipc_threadsafe::Service;
+
+type RendezvousServer = Server<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
+type MapServer = Server<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapReplyHeader>;
+type StatsServer = Server<Ipc, StatsRequest, (), StatsReply, ()>;
+
+/// How the daemon runs. [`DaemonConfig::default`] is what `dyfosd` uses without flags.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DaemonConfig {
+    /// Service-name prefix (`--prefix`), default `dyfos/`.
+    pub prefix: String,
+    /// iceoryx2 file prefix (`--domain`); `None` for iceoryx2's default `iox2_`.
+    pub domain: Option<String>,
+    /// Where maps are persisted (`--state-dir`).
+    pub state_dir: PathBuf,
+    /// Search worker threads; 0 for one per core (at least 2 are started).
+    pub workers: usize,
+    /// Most client ports per service (each `Client` holds one of each).
+    pub max_clients: usize,
+    /// Most requests one client port may have in flight.
+    pub max_requests_per_client: usize,
+    /// Most queries waiting for a worker before new ones get `busy`.
+    pub max_queued: usize,
+    /// How long the IPC thread keeps polling after its last request before it
+    /// sleeps on the wake-up event.
+    pub spin: Duration,
+    /// An upload with no new chunk for this long is abandoned.
+    pub upload_idle_timeout: Duration,
+}
+
+/// `$XDG_STATE_HOME/dyfos`, else `~/.local/state/dyfos`, else `./dyfos-state`.
+pub fn default_state_dir() -> PathBuf {
+    if let Some(d) = std::env::var_os("XDG_STATE_HOME").filter(|d| !d.is_empty()) {
+        return PathBuf::from(d).join("dyfos");
+    }
+    match std::env::var_os("HOME").filter(|d| !d.is_empty()) {
+        Some(home) => PathBuf::from(home).join(".local/state/dyfos"),
+        None => PathBuf::from("dyfos-state"),
+    }
+}
+
+impl Default for DaemonConfig {
+    fn default() -> Self {
+        DaemonConfig {
+            prefix: DEFAULT_PREFIX.to_string(),
+            domain: None,
+            state_dir: default_state_dir(),
+            workers: 0,
+            max_clients: 64,
+            max_requests_per_client: 4,
+            max_queued: 256,
+            spin: Duration::from_micros(200),
+            upload_idle_timeout: Duration::from_secs(30),
+        }
+    }
+}
+
+/// Why the daemon could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonCreateError {
+    /// `--prefix` cannot name services.
+    #[error(transparent)]
+    InvalidPrefix(#[from] PrefixError),
+    /// `--domain` is not a valid file-name prefix.
+    #[error("iceoryx2 domain `{0}` is not a valid file-name prefix; use letters, digits and `_`, at most 32")]
+    InvalidDomain(String),
+    /// A limit is zero.
+    #[error("{0} must be at least 1")]
+    InvalidLimit(&'static str),
+    /// The state directory is unusable.
+    #[error(transparent)]
+    Store(#[from] StoreOpenError),
+    /// Another daemon serves this prefix.
+    #[error("another dyfosd already serves prefix `{0}`; stop it, or start this one with another --prefix")]
+    AlreadyRunning(String),
+    /// A service exists with other types or smaller limits (a daemon of another
+    /// version or configuration, kept alive by its clients).
+    #[error(
+        "service `{service}` exists with other types or limits ({reason}); stop the clients of the old daemon, or use another --prefix"
+    )]
+    Incompatible {
+        /// The service.
+        service: String,
+        /// iceoryx2's reason.
+        reason: String,
+    },
+    /// Any other iceoryx2 failure.
+    #[error("iceoryx2: {0}")]
+    Ipc(String),
+}
+
+fn ipc_err(e: impl std::fmt::Debug) -> DaemonCreateError {
+    DaemonCreateError::Ipc(format!("{e:?}"))
+}
+
+/// What [`Daemon::wait`] saw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WaitOutcome {
+    /// A client woke the daemon (or a request was already pending).
+    Work,
+    /// The timeout passed.
+    Idle,
+    /// SIGINT or SIGTERM: call [`Daemon::shutdown`].
+    Terminate,
+}
+
+/// The iceoryx2 configuration of a domain.
+pub fn iceoryx_config(domain: Option<&str>) -> Result<iceoryx2::config::Config, DaemonCreateError> {
+    let mut config = iceoryx2::config::Config::default();
+    if let Some(d) = domain {
+        let valid = !d.is_empty() && d.len() <= 32 && d.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_');
+        config.global.prefix = match FileName::new(d.as_bytes()) {
+            Ok(name) if valid => name,
+            _ => return Err(DaemonCreateError::InvalidDomain(d.to_string())),
+        };
+    }
+    Ok(config)
+}
+
+/// State shared by the IPC thread and the workers.
+pub(crate) struct Shared {
+    pub(crate) queue: Mutex<rendezvous::Queue>,
+    pub(crate) work: Condvar,
+    pub(crate) reply: Notifier<Ipc>,
+    pub(crate) stats: Mutex<stats::Stats>,
+    pub(crate) threads: usize,
+}
+
+impl Shared {
+    /// Wakes the client whose reply listener has id `listener`.
+    pub(crate) fn notify(&self, listener: u128) {
+        self.reply.for_each_listener(|m, details| {
+            if details.listener_id.value() == listener {
+                if let Err(e) = m.notify() {
+                    debug!("reply notification failed: {e:?}");
+                }
+                CallbackProgression::Stop
+            } else {
+                CallbackProgression::Continue
+            }
+        });
+    }
+}
+
+/// The daemon: its ports, maps and workers.
+pub struct Daemon {
+    config: DaemonConfig,
+    names: ServiceNames,
+    node: Node<Ipc>,
+    rendezvous: RendezvousServer,
+    map: MapServer,
+    stats: StatsServer,
+    wake: Listener<Ipc>,
+    waitset: WaitSet<Ipc>,
+    shared: Arc<Shared>,
+    workers: Vec<JoinHandle<()>>,
+    maps: map::Maps,
+    last_housekeeping: Instant,
+    closing: bool,
+}
+
+impl std::fmt::Debug for Daemon {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Daemon").field("prefix", &self.names.prefix).field("maps", &self.maps.len()).finish()
+    }
+}
+
+impl Daemon {
+    /// Loads the maps, cleans up after dead processes (a daemon killed by SIGKILL
+    /// leaves its shared memory behind), creates the services with the daemon's
+    /// limits and starts the workers.
+    pub fn create(config: &DaemonConfig) -> Result<Daemon, DaemonCreateError> {
+        let names = ServiceNames::new(&config.prefix)?;
+        for (name, v) in [
+            ("max_clients", config.max_clients),
+            ("max_requests_per_client", config.max_requests_per_client),
+            ("max_queued", config.max_queued),
+        ] {
+            if v == 0 {
+                return Err(DaemonCreateError::InvalidLimit(name));
+            }
+        }
+        let iox = iceoryx_config(config.domain.as_deref())?;
+        let store = Store::open(&config.state_dir)?;
+        let loaded = store.load_all();
+        for q in &loaded.quarantined {
+            warn!(file = %q.file.display(), moved_to = ?q.moved_to, "map file could not be loaded and was quarantined: {}", q.reason);
+        }
+        if loaded.maps.len() > MAX_MAPS {
+            warn!(
+                "{} maps in the state directory, more than the limit of {MAX_MAPS}; only the first are served",
+                loaded.maps.len()
+            );
+        }
+        let node = NodeBuilder::new().config(&iox).create::<Ipc>().map_err(ipc_err)?;
+        let cleanup = node.try_cleanup_dead_nodes();
+        if cleanup.cleanups > 0 || cleanup.failed_cleanups > 0 {
+            info!(cleaned = cleanup.cleanups, failed = cleanup.failed_cleanups, "removed resources of dead processes");
+        }
+        let clients = config.max_clients;
+        let nodes = clients + 2;
+        let service_name = |s: &str| ServiceName::new(s).map_err(ipc_err);
+        macro_rules! create_rr {
+            ($name:expr, $builder:expr) => {
+                $builder
+                    .enable_fire_and_forget_requests(false)
+                    .max_servers(1)
+                    .max_clients(clients)
+                    .max_nodes(nodes)
+                    .max_active_requests_per_client(config.max_requests_per_client)
+                    .max_response_buffer_size(2)
+                    .max_loaned_requests(2)
+                    .max_borrowed_responses_per_pending_response(2)
+                    .open_or_create()
+                    .map_err(|e| DaemonCreateError::Incompatible { service: $name.clone(), reason: format!("{e:?}") })?
+            };
+        }
+        let rendezvous = create_rr!(
+            names.rendezvous,
+            node.service_builder(&service_name(&names.rendezvous)?)
+                .request_response::<[WireDelta], RendezvousReply>()
+                .request_user_header::<RendezvousRequestHeader>()
+        );
+        let map = create_rr!(
+            names.map,
+            node.service_builder(&service_name(&names.map)?)
+                .request_response::<[WireDelta], [WireDelta]>()
+                .request_user_header::<MapRequestHeader>()
+                .response_user_header::<MapReplyHeader>()
+        );
+        let stats = create_rr!(
+            names.stats,
+            node.service_builder(&service_name(&names.stats)?).request_response::<StatsRequest, StatsReply>()
+        );
+        let event = |name: &String| {
+            node.service_builder(&service_name(name)?)
+                .event()
+                .max_nodes(nodes)
+                .max_notifiers(clients + 1)
+                .max_listeners(clients + 1)
+                .open_or_create()
+                .map_err(|e| DaemonCreateError::Incompatible { service: name.clone(), reason: format!("{e:?}") })
+        };
+        let wake_service = event(&names.wake)?;
+        let reply_service = event(&names.reply)?;
+        let already = |e: &dyn std::fmt::Debug| {
+            let text = format!("{e:?}");
+            if text.contains("ExceedsMaxSupported") {
+                DaemonCreateError::AlreadyRunning(config.prefix.clone())
+            } else {
+                DaemonCreateError::Ipc(text)
+            }
+        };
+        let rendezvous_server = rendezvous.server_builder().create().map_err(|e| already(&e))?;
+        let map_server = map
+            .server_builder()
+            .initial_max_slice_len(64)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(|e| already(&e))?;
+        let stats_server = stats.server_builder().create().map_err(|e| already(&e))?;
+        let wake = wake_service.listener_builder().create().map_err(ipc_err)?;
+        let reply = reply_service.notifier_builder().create().map_err(ipc_err)?;
+        let waitset = WaitSetBuilder::new().create::<Ipc>().map_err(ipc_err)?;
+
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let threads = if config.workers == 0 { cores } else { config.workers }.max(2);
+        let shared = Arc::new(Shared {
+            queue: Mutex::new(rendezvous::Queue::new(threads)),
+            work: Condvar::new(),
+            reply,
+            stats: Mutex::new(stats::Stats::new()),
+            threads,
+        });
+        let workers = (0..threads)
+            .map(|i| {
+                let shared = Arc::clone(&shared);
+                std::thread::Builder::new()
+                    .name(format!("dyfos-worker-{i}"))
+                    .spawn(move || rendezvous::worker(&shared))
+                    .map_err(|e| DaemonCreateError::Ipc(format!("cannot start worker thread: {e}")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let maps = map::Maps::new(store, loaded.maps.into_iter().take(MAX_MAPS), config.upload_idle_timeout);
+        for (id, world) in maps.iter() {
+            info!(map = id, version = world.version(), obstacles = world.obstacles().len(), "map loaded");
+        }
+        info!(
+            prefix = %names.prefix,
+            state_dir = %config.state_dir.display(),
+            workers = threads,
+            maps = maps.len(),
+            pid = std::process::id(),
+            "dyfosd ready"
+        );
+        Ok(Daemon {
+            config: config.clone(),
+            names,
+            node,
+            rendezvous: rendezvous_server,
+            map: map_server,
+            stats: stats_server,
+            wake,
+            waitset,
+            shared,
+            workers,
+            maps,
+            last_housekeeping: Instant::now(),
+            closing: false,
+        })
+    }
+
+    /// The service names served.
+    pub fn names(&self) -> &ServiceNames {
+        &self.names
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &DaemonConfig {
+        &self.config
+    }
+
+    /// Answers (or hands to a worker) every request pending now; returns how many
+    /// requests it took. Never blocks.
+    pub fn spin(&mut self) -> usize {
+        let mut handled = 0;
+        loop {
+            let before = handled;
+            match self.rendezvous.receive() {
+                Ok(Some(active)) => {
+                    handled += 1;
+                    rendezvous::on_request(self, active);
+                }
+                Ok(None) => {}
+                Err(e) => warn!("rendezvous receive failed: {e:?}"),
+            }
+            match self.map.receive() {
+                Ok(Some(active)) => {
+                    handled += 1;
+                    map::on_request(self, active);
+                }
+                Ok(None) => {}
+                Err(e) => warn!("map receive failed: {e:?}"),
+            }
+            match self.stats.receive() {
+                Ok(Some(active)) => {
+                    handled += 1;
+                    stats::on_request(self, active);
+                }
+                Ok(None) => {}
+                Err(e) => warn!("stats receive failed: {e:?}"),
+            }
+            if handled == before {
+                break;
+            }
+        }
+        if self.last_housekeeping.elapsed() >= Duration::from_secs(1) {
+            self.housekeeping();
+        }
+        handled
+    }
+
+    fn housekeeping(&mut self) {
+        self.last_housekeeping = Instant::now();
+        self.maps.expire_uploads();
+        let cleanup = self.node.try_cleanup_dead_nodes();
+        if cleanup.cleanups > 0 {
+            info!(cleaned = cleanup.cleanups, "removed resources of dead clients");
+        }
+    }
+
+    /// Whether SIGINT or SIGTERM arrived.
+    pub fn termination_requested(&self) -> bool {
+        self.node.wait(Duration::ZERO).is_err()
+    }
+
+    /// Sleeps until a client notifies the wake-up event, `timeout` passes, or a
+    /// termination signal arrives. Uses no CPU while it sleeps.
+    pub fn wait(&mut self, timeout: Duration) -> WaitOutcome {
+        // Consume stale notifications first, then look once more: a request sent
+        // before its notification was consumed is seen here, one sent after wakes us.
+        let _ = self.wake.try_wait(|_| {});
+        if self.spin() > 0 {
+            return WaitOutcome::Work;
+        }
+        let guard = match self.waitset.attach_notification(&self.wake) {
+            Ok(g) => g,
+            Err(e) => {
+                warn!("cannot attach the wake-up listener: {e:?}");
+                std::thread::sleep(timeout.min(Duration::from_millis(10)));
+                return WaitOutcome::Idle;
+            }
+        };
+        let mut woke = false;
+        let result = self.waitset.wait_and_process_once_with_timeout(
+            |id| {
+                if id.has_event_from(&guard) {
+                    woke = true;
+                }
+                CallbackProgression::Continue
+            },
+            timeout,
+        );
+        drop(guard);
+        match result {
+            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => WaitOutcome::Terminate,
+            Ok(_) if woke => WaitOutcome::Work,
+            Ok(_) => WaitOutcome::Idle,
+            Err(e) => {
+                warn!("waiting for requests failed: {e:?}");
+                WaitOutcome::Idle
+            }
+        }
+    }
+
+    /// Stops taking queries (new ones get `shutting_down`), keeps answering map and
+    /// stats requests until every accepted query is answered, then stops the
+    /// workers and closes the ports, removing the daemon's shared memory.
+    pub fn shutdown(mut self) {
+        self.closing = true;
+        let pending = self.shared.queue.lock().map_or(0, |q| q.pending());
+        info!(pending, "shutting down: finishing the queries in flight");
+        loop {
+            let busy = self.shared.queue.lock().map_or(0, |q| q.pending());
+            if busy == 0 {
+                break;
+            }
+            self.spin();
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        if let Ok(mut q) = self.shared.queue.lock() {
+            q.close();
+        }
+        self.shared.work.notify_all();
+        for w in self.workers.drain(..) {
+            if w.join().is_err() {
+                warn!("a worker thread panicked");
+            }
+        }
+        info!("dyfosd stopped");
+    }
+}

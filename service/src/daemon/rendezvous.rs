@@ -1,0 +1,270 @@
+//! The rendezvous service: validate on the IPC thread, search on a worker.
+
+use super::map::{check_version, invalid_delta, unknown_map};
+use super::{Daemon, Ipc, Shared};
+use crate::search::SearchControl;
+use crate::{SearchError, solve};
+use dyfos_shared::answer::{Algorithm, StopReason};
+use dyfos_shared::sdsmm::NoiseModel;
+use dyfos_shared::wire::map::WireDelta;
+use dyfos_shared::wire::rendezvous::{Mode, RendezvousReply, RendezvousRequest, RendezvousRequestHeader};
+use dyfos_shared::wire::{Rejection, Status, join_u128};
+use dyfos_shared::world::World;
+use iceoryx2::active_request::ActiveRequest;
+use std::collections::VecDeque;
+use std::sync::{Arc, MutexGuard};
+use std::time::Instant;
+use tracing::{debug, trace};
+
+type RendezvousActive = ActiveRequest<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
+
+/// An accepted query waiting for (or on) a worker.
+pub(crate) struct Job {
+    active: RendezvousActive,
+    request: RendezvousRequest,
+    world: Arc<World>,
+    received: Instant,
+    reply_to: u128,
+    request_id: u64,
+}
+
+/// The queries waiting for workers, in two classes: `brute` (heavy) may occupy
+/// all workers but one, so a cheap query always finds a free worker.
+pub(crate) struct Queue {
+    light: VecDeque<Job>,
+    heavy: VecDeque<Job>,
+    running: usize,
+    running_heavy: usize,
+    heavy_limit: usize,
+    closed: bool,
+}
+
+impl Queue {
+    pub(crate) fn new(threads: usize) -> Self {
+        Queue {
+            light: VecDeque::new(),
+            heavy: VecDeque::new(),
+            running: 0,
+            running_heavy: 0,
+            heavy_limit: threads.saturating_sub(1).max(1),
+            closed: false,
+        }
+    }
+
+    pub(crate) fn queued(&self) -> usize {
+        self.light.len() + self.heavy.len()
+    }
+
+    pub(crate) fn running(&self) -> usize {
+        self.running
+    }
+
+    /// Queued or running.
+    pub(crate) fn pending(&self) -> usize {
+        self.queued() + self.running
+    }
+
+    pub(crate) fn close(&mut self) {
+        self.closed = true;
+    }
+
+    fn push(&mut self, job: Job) {
+        if job.request.algorithm == Algorithm::Brute {
+            self.heavy.push_back(job);
+        } else {
+            self.light.push_back(job);
+        }
+    }
+
+    /// The next job a free worker may take, and whether it is heavy.
+    fn take(&mut self) -> Option<(Job, bool)> {
+        let (job, heavy) = if let Some(job) = self.light.pop_front() {
+            (job, false)
+        } else if self.running_heavy < self.heavy_limit {
+            (self.heavy.pop_front()?, true)
+        } else {
+            return None;
+        };
+        self.running += 1;
+        self.running_heavy += usize::from(heavy);
+        Some((job, heavy))
+    }
+
+    fn finish(&mut self, heavy: bool) {
+        self.running -= 1;
+        self.running_heavy -= usize::from(heavy);
+    }
+}
+
+fn lock<T>(m: &std::sync::Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// A worker thread: takes jobs until the queue is closed.
+pub(crate) fn worker(shared: &Shared) {
+    loop {
+        let (job, heavy) = {
+            let mut q = lock(&shared.queue);
+            loop {
+                if let Some(taken) = q.take() {
+                    break taken;
+                }
+                if q.closed {
+                    return;
+                }
+                q = shared.work.wait(q).unwrap_or_else(|poisoned| poisoned.into_inner());
+            }
+        };
+        run(shared, job);
+        lock(&shared.queue).finish(heavy);
+        // A heavy job may have become runnable.
+        shared.work.notify_all();
+    }
+}
+
+fn run(shared: &Shared, job: Job) {
+    let Job { active, request, world, received, reply_to, request_id } = job;
+    let deadline = request.deadline.map(|d| received + d);
+    if !active.is_connected() {
+        debug!(request_id, "client left before its query started; skipped");
+        return;
+    }
+    let mut reply = if deadline.is_some_and(|d| Instant::now() >= d) {
+        RendezvousReply::rejected(
+            request_id,
+            &Rejection::new(
+                Status::DeadlineExceeded,
+                format!(
+                    "the deadline of {:?} passed while the query waited for a worker; give it more time or ask for less (a budget, a cheaper algorithm)",
+                    request.deadline.unwrap_or_default()
+                ),
+            ),
+        )
+    } else {
+        match NoiseModel::from_params(&request.params) {
+            Err(e) => RendezvousReply::rejected(request_id, &Rejection::new(Status::UnsupportedModel, e.to_string())),
+            Ok(model) => {
+                let control =
+                    SearchControl { seed: request.seed, budget: request.budget, deadline, threads: shared.threads };
+                match solve(&world, &request.belief, &request.params, &model, request.algorithm, &control) {
+                    Ok(answer) => RendezvousReply::answer(request_id, &answer),
+                    Err(e @ SearchError::NoFeasiblePose { stop, .. }) => {
+                        let status = if stop == StopReason::Deadline {
+                            Status::DeadlineExceeded
+                        } else {
+                            Status::NoFeasiblePose
+                        };
+                        RendezvousReply::rejected(request_id, &Rejection::new(status, e.to_string()))
+                    }
+                }
+            }
+        }
+    };
+    let micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
+    reply.daemon_micros = micros;
+    {
+        let mut stats = lock(&shared.stats);
+        match Status::try_from(reply.status) {
+            Ok(Status::Ok) => stats.served(micros),
+            Ok(s) => stats.failed(s),
+            Err(_) => {}
+        }
+    }
+    debug!(request_id, status = reply.status, micros, map = request.map, version = world.version(), "query answered");
+    send(shared, &active, reply, reply_to);
+}
+
+/// Sends `reply` and wakes the client.
+fn send(shared: &Shared, active: &RendezvousActive, reply: RendezvousReply, reply_to: u128) {
+    match active.loan_uninit() {
+        Ok(loan) => {
+            if let Err(e) = loan.write_payload(reply).send() {
+                debug!("rendezvous reply not delivered (client gone?): {e:?}");
+            }
+        }
+        Err(e) => debug!("rendezvous reply not delivered (client gone?): {e:?}"),
+    }
+    shared.notify(reply_to);
+}
+
+enum Accepted {
+    Checked(u64),
+    Queued(Box<RendezvousRequest>, Arc<World>),
+}
+
+fn accept(daemon: &mut Daemon, header: &RendezvousRequestHeader, records: &[WireDelta]) -> Result<Accepted, Rejection> {
+    if daemon.closing {
+        return Err(Rejection::new(Status::ShuttingDown, "dyfosd is shutting down; retry when it is back"));
+    }
+    let (request, mode) = RendezvousRequest::decode(header, records)?;
+    let world = daemon.maps.get(request.map).ok_or_else(|| unknown_map(request.map))?;
+    check_version(request.map, &world, request.expected_version)?;
+    if mode == Mode::Solve {
+        let queued = lock(&daemon.shared.queue).queued();
+        if queued >= daemon.config.max_queued {
+            return Err(Rejection::new(
+                Status::Busy,
+                format!("{queued} queries are waiting for a worker; retry shortly or start dyfosd with more --workers"),
+            ));
+        }
+    }
+    let world = if request.deltas.is_empty() {
+        world
+    } else {
+        let next = world.apply(&request.deltas).map_err(invalid_delta)?;
+        match mode {
+            Mode::Check => Arc::new(next),
+            Mode::Solve => daemon.maps.commit(request.map, next, "inline deltas")?,
+        }
+    };
+    Ok(match mode {
+        Mode::Check => Accepted::Checked(world.version()),
+        Mode::Solve => Accepted::Queued(Box::new(request), world),
+    })
+}
+
+pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
+    let received = Instant::now();
+    // Copy the header out of shared memory once; validate the copy.
+    let header = *active.user_header();
+    let request_id = header.request_id;
+    let reply_to = join_u128(header.reply_to);
+    trace!(request_id, records = active.payload().len(), "rendezvous request");
+    match accept(daemon, &header, active.payload()) {
+        Err(rejection) => {
+            debug!(request_id, status = %rejection.status, "rendezvous request rejected: {}", rejection.message);
+            lock(&daemon.shared.stats).failed(rejection.status);
+            let mut reply = RendezvousReply::rejected(request_id, &rejection);
+            reply.daemon_micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
+            send(&daemon.shared, &active, reply, reply_to);
+        }
+        Ok(Accepted::Checked(version)) => {
+            let mut reply = RendezvousReply::checked(request_id, version);
+            reply.daemon_micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
+            send(&daemon.shared, &active, reply, reply_to);
+        }
+        Ok(Accepted::Queued(request, world)) => {
+            lock(&daemon.shared.queue).push(Job { active, request: *request, world, received, reply_to, request_id });
+            daemon.shared.work.notify_one();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn heavy_jobs_leave_one_worker_free() {
+        let mut q = Queue::new(2);
+        assert_eq!(q.heavy_limit, 1);
+        assert_eq!(Queue::new(8).heavy_limit, 7);
+        assert_eq!(q.pending(), 0);
+        q.running_heavy = 1;
+        q.running = 1;
+        // No heavy job can start while one runs on a 2-worker pool.
+        assert!(q.take().is_none());
+        q.finish(true);
+        assert_eq!((q.running, q.running_heavy), (0, 0));
+    }
+}

@@ -1,0 +1,122 @@
+//! The stats service: counters kept by the IPC thread and the workers.
+
+use super::Daemon;
+use dyfos_shared::wire::stats::{STATUS_SLOTS, StatsReply, StatsRequest};
+use dyfos_shared::wire::{Status, join_u128};
+use tracing::debug;
+
+/// Latencies kept for the percentiles.
+const WINDOW: usize = 4096;
+
+/// Counters and the latency window.
+pub(crate) struct Stats {
+    started: std::time::Instant,
+    queries_served: u64,
+    requests_failed: u64,
+    map_requests: u64,
+    errors: [u64; STATUS_SLOTS],
+    latencies: Vec<u64>,
+    next: usize,
+}
+
+impl Stats {
+    pub(crate) fn new() -> Self {
+        Stats {
+            started: std::time::Instant::now(),
+            queries_served: 0,
+            requests_failed: 0,
+            map_requests: 0,
+            errors: [0; STATUS_SLOTS],
+            latencies: Vec::with_capacity(WINDOW),
+            next: 0,
+        }
+    }
+
+    /// A query answered with a pose after `micros` in the daemon.
+    pub(crate) fn served(&mut self, micros: u64) {
+        self.queries_served += 1;
+        if self.latencies.len() < WINDOW {
+            self.latencies.push(micros);
+        } else {
+            self.latencies[self.next] = micros;
+        }
+        self.next = (self.next + 1) % WINDOW;
+    }
+
+    /// A request answered with an error.
+    pub(crate) fn failed(&mut self, status: Status) {
+        self.requests_failed += 1;
+        self.errors[(status as usize).min(STATUS_SLOTS - 1)] += 1;
+    }
+
+    /// A map request answered with success.
+    pub(crate) fn map_ok(&mut self) {
+        self.map_requests += 1;
+    }
+
+    fn percentiles(&self) -> [u64; 4] {
+        if self.latencies.is_empty() {
+            return [0; 4];
+        }
+        let mut v = self.latencies.clone();
+        v.sort_unstable();
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        [at(0.5), at(0.9), at(0.99), v[v.len() - 1]]
+    }
+}
+
+pub(super) fn on_request(
+    daemon: &mut Daemon,
+    active: iceoryx2::active_request::ActiveRequest<super::Ipc, StatsRequest, (), StatsReply, ()>,
+) {
+    let request = *active.payload();
+    let (queued, running) = daemon.shared.queue.lock().map_or((0, 0), |q| (q.queued() as u64, q.running() as u64));
+    let reply = match daemon.shared.stats.lock() {
+        Ok(s) => StatsReply {
+            request_id: request.request_id,
+            pid: u64::from(std::process::id()),
+            uptime_micros: u64::try_from(s.started.elapsed().as_micros()).unwrap_or(u64::MAX),
+            queries_served: s.queries_served,
+            requests_failed: s.requests_failed,
+            map_requests: s.map_requests,
+            maps: daemon.maps.len() as u64,
+            queued,
+            running,
+            workers: daemon.shared.threads as u64,
+            latency_micros: s.percentiles(),
+            latency_samples: s.latencies.len() as u64,
+            errors_by_code: s.errors,
+        },
+        Err(_) => StatsReply { request_id: request.request_id, ..StatsReply::default() },
+    };
+    match active.loan_uninit() {
+        Ok(loan) => {
+            if let Err(e) = loan.write_payload(reply).send() {
+                debug!("stats reply not delivered: {e:?}");
+            }
+        }
+        Err(e) => debug!("stats reply not delivered: {e:?}"),
+    }
+    daemon.shared.notify(join_u128(request.reply_to));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_over_the_window() {
+        let mut s = Stats::new();
+        assert_eq!(s.percentiles(), [0; 4]);
+        for v in 1..=100 {
+            s.served(v);
+        }
+        assert_eq!(s.percentiles(), [51, 90, 99, 100]);
+        for _ in 0..WINDOW {
+            s.served(7);
+        }
+        assert_eq!(s.percentiles(), [7; 4]);
+        s.failed(Status::UnknownMap);
+        assert_eq!(s.errors[Status::UnknownMap as usize], 1);
+    }
+}
