@@ -143,7 +143,13 @@ impl Connection {
             return Ok(Opened::Missing);
         };
         use iceoryx2::service::port_factory::PortFactory as _;
-        if rendezvous.dynamic_config().number_of_servers() == 0 {
+        // The daemon creates its servers one after the other: wait for all three.
+        let serving = [
+            rendezvous.dynamic_config().number_of_servers(),
+            map.dynamic_config().number_of_servers(),
+            stats.dynamic_config().number_of_servers(),
+        ];
+        if serving.contains(&0) {
             return Ok(Opened::Missing);
         }
         let reply_listener = reply.listener_builder().create().map_err(open_ipc)?;

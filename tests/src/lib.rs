@@ -1,1 +1,317 @@
+//! Helpers for the multi-process integration tests: each test gets its own
+//! [`Sandbox`] (service prefix, iceoryx2 domain and state directory), starts the
+//! real `dyfosd` binary, and every process it starts is killed when dropped.
+//!
+//! ```no_run
+//! use dyfos_tests::Sandbox;
+//!
+//! let sandbox = Sandbox::new("doc");
+//! let daemon = sandbox.start_daemon(&[]);
+//! let mut client = sandbox.client();
+//! assert_eq!(client.stats(std::time::Duration::from_secs(5)).unwrap().maps, 0);
+//! drop(daemon);
+//! ```
 
+use dyfos_client::{Client, ClientConfig};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+/// How long any wait in these tests may take before the test fails.
+pub const PATIENCE: Duration = Duration::from_secs(30);
+
+/// The directory holding the workspace's binaries (`target/debug`), found next to
+/// the running test executable (`target/debug/deps/…`).
+pub fn bin_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("the test executable's path");
+    let deps = exe.parent().expect("deps dir");
+    deps.parent().expect("target profile dir").to_path_buf()
+}
+
+/// A workspace binary (`dyfosd`, `dyfos`) or, with `examples/` in front, an example.
+pub fn bin(name: &str) -> PathBuf {
+    let path = bin_dir().join(name);
+    assert!(
+        path.exists(),
+        "{} is missing: run `cargo build --workspace --bins --examples` before `cargo test`",
+        path.display()
+    );
+    path
+}
+
+/// Polls `done` until it returns `Some`, panicking with `what` after [`PATIENCE`].
+pub fn wait_for<T>(what: &str, mut done: impl FnMut() -> Option<T>) -> T {
+    let start = Instant::now();
+    loop {
+        if let Some(v) = done() {
+            return v;
+        }
+        assert!(start.elapsed() < PATIENCE, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+static NEXT: AtomicU32 = AtomicU32::new(0);
+
+/// One test's isolated world: a service prefix, an iceoryx2 domain (so its shared
+/// memory files are recognisable) and a state directory, removed on drop.
+#[derive(Debug)]
+pub struct Sandbox {
+    /// Service-name prefix, e.g. `t-restart-1234-0/`.
+    pub prefix: String,
+    /// iceoryx2 file prefix, e.g. `dyt1234_0_`.
+    pub domain: String,
+    /// The daemon's state directory.
+    pub state_dir: PathBuf,
+}
+
+impl Sandbox {
+    /// A fresh sandbox named after the test.
+    pub fn new(test: &str) -> Sandbox {
+        let n = NEXT.fetch_add(1, Ordering::Relaxed);
+        let pid = std::process::id();
+        let state_dir = std::env::temp_dir().join(format!("dyfos-test-{test}-{pid}-{n}"));
+        let _ = std::fs::remove_dir_all(&state_dir);
+        Sandbox { prefix: format!("t-{test}-{pid}-{n}/"), domain: format!("dyt{pid}_{n}_"), state_dir }
+    }
+
+    /// A client configuration for this sandbox.
+    pub fn client_config(&self) -> ClientConfig {
+        ClientConfig {
+            prefix: self.prefix.clone(),
+            domain: Some(self.domain.clone()),
+            connect_timeout: PATIENCE,
+            ..ClientConfig::default()
+        }
+    }
+
+    /// A connected client (the daemon must be starting or running).
+    pub fn client(&self) -> Client {
+        Client::connect(&self.client_config()).expect("connect to the test daemon")
+    }
+
+    /// The flags that point a `dyfos` command at this sandbox's daemon.
+    pub fn dyfos_flags(&self) -> Vec<String> {
+        vec!["--prefix".into(), self.prefix.clone(), "--domain".into(), self.domain.clone()]
+    }
+
+    /// Starts `dyfosd` for this sandbox and waits until it answers.
+    pub fn start_daemon(&self, extra: &[&str]) -> DaemonProcess {
+        let log = self.state_dir.with_extension(format!("log-{}", NEXT.fetch_add(1, Ordering::Relaxed)));
+        let log_file = std::fs::File::create(&log).expect("daemon log file");
+        let child = Command::new(bin("dyfosd"))
+            .args(["--prefix", &self.prefix, "--domain", &self.domain, "--state-dir"])
+            .arg(&self.state_dir)
+            .args(extra)
+            .env("RUST_LOG", "debug")
+            .stdout(Stdio::null())
+            .stderr(log_file)
+            .spawn()
+            .expect("start dyfosd");
+        let mut daemon = DaemonProcess { child: Some(child), log };
+        let mut client = wait_for("dyfosd to serve", || {
+            if let Some(status) = daemon.try_status() {
+                panic!("dyfosd exited at start ({status}):\n{}", daemon.log());
+            }
+            Client::connect(&ClientConfig { connect_timeout: Duration::from_millis(50), ..self.client_config() }).ok()
+        });
+        client.stats(PATIENCE).expect("the new daemon answers stats");
+        daemon
+    }
+
+    /// Shared-memory files of this sandbox's domain, except iceoryx2's persistent
+    /// per-domain node counter (`*.global_mgmt`, 16 bytes, never removed by design).
+    pub fn shm_leftovers(&self) -> Vec<String> {
+        std::fs::read_dir("/dev/shm")
+            .map(|entries| {
+                entries
+                    .flatten()
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| n.starts_with(&self.domain) && !n.ends_with(".global_mgmt"))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+}
+
+impl Drop for Sandbox {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.state_dir);
+        if let Ok(entries) = std::fs::read_dir("/dev/shm") {
+            for e in entries.flatten() {
+                if e.file_name().to_string_lossy().starts_with(&self.domain) {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+    }
+}
+
+/// A running `dyfosd`, killed (SIGKILL) when dropped.
+#[derive(Debug)]
+pub struct DaemonProcess {
+    child: Option<Child>,
+    log: PathBuf,
+}
+
+impl DaemonProcess {
+    /// The process id.
+    pub fn pid(&self) -> u32 {
+        self.child.as_ref().map_or(0, Child::id)
+    }
+
+    /// Its log so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    fn try_status(&mut self) -> Option<ExitStatus> {
+        self.child.as_mut().and_then(|c| c.try_wait().ok().flatten())
+    }
+
+    /// SIGKILL, and reap.
+    pub fn kill9(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+
+    /// SIGTERM, then waits for the exit.
+    pub fn terminate(&mut self) -> ExitStatus {
+        signal(self.pid(), "TERM");
+        let status = wait_for("dyfosd to exit after SIGTERM", || self.try_status());
+        self.child = None;
+        status
+    }
+}
+
+impl Drop for DaemonProcess {
+    fn drop(&mut self) {
+        self.kill9();
+        let _ = std::fs::remove_file(&self.log);
+    }
+}
+
+/// Sends a signal (`TERM`, `KILL`, …) to a process by id.
+pub fn signal(pid: u32, name: &str) {
+    let ok = Command::new("kill").arg(format!("-{name}")).arg(pid.to_string()).status().is_ok_and(|s| s.success());
+    assert!(ok, "kill -{name} {pid} failed");
+}
+
+/// A child process killed when dropped.
+#[derive(Debug)]
+pub struct ChildGuard(pub Child);
+
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The workspace's test data directory.
+pub fn data(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(path)
+}
+
+/// An answer's JSON without its compute time, for bit-for-bit comparisons
+/// (`serde_json` prints every `f64` so that it reads back exactly).
+pub fn without_micros(mut json: serde_json::Value) -> serde_json::Value {
+    json.as_object_mut().expect("an answer object").remove("micros");
+    json
+}
+
+/// A client that sends raw wire messages, as a buggy or hostile peer could: any
+/// header, any records. Uses iceoryx2's plain `ipc::Service` (the daemon uses the
+/// thread-safe variant; both share memory). Replies are polled.
+pub struct RawClient {
+    _node: iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+    rendezvous: iceoryx2::port::client::Client<
+        iceoryx2::prelude::ipc::Service,
+        [WireDelta],
+        RendezvousRequestHeader,
+        RendezvousReply,
+        (),
+    >,
+    map: iceoryx2::port::client::Client<
+        iceoryx2::prelude::ipc::Service,
+        [WireDelta],
+        MapRequestHeader,
+        [WireDelta],
+        MapReplyHeader,
+    >,
+    wake: iceoryx2::port::notifier::Notifier<iceoryx2::prelude::ipc::Service>,
+}
+
+use dyfos_shared::wire::map::{MapReplyHeader, MapRequestHeader, WireDelta};
+use dyfos_shared::wire::rendezvous::{RendezvousReply, RendezvousRequestHeader};
+
+impl RawClient {
+    /// Opens the sandbox daemon's services.
+    pub fn open(sandbox: &Sandbox) -> RawClient {
+        use iceoryx2::prelude::*;
+        let mut config = iceoryx2::config::Config::default();
+        config.global.prefix = FileName::new(sandbox.domain.as_bytes()).expect("domain");
+        let node = NodeBuilder::new()
+            .config(&config)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .expect("node");
+        let names = dyfos_shared::wire::ServiceNames::new(&sandbox.prefix).expect("prefix");
+        let name = |s: &str| ServiceName::new(s).expect("service name");
+        let rendezvous = node
+            .service_builder(&name(&names.rendezvous))
+            .request_response::<[WireDelta], RendezvousReply>()
+            .request_user_header::<RendezvousRequestHeader>()
+            .open()
+            .expect("open rendezvous")
+            .client_builder()
+            .initial_max_slice_len(8)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .expect("rendezvous client");
+        let map = node
+            .service_builder(&name(&names.map))
+            .request_response::<[WireDelta], [WireDelta]>()
+            .request_user_header::<MapRequestHeader>()
+            .response_user_header::<MapReplyHeader>()
+            .open()
+            .expect("open map")
+            .client_builder()
+            .initial_max_slice_len(8)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .expect("map client");
+        let wake = node
+            .service_builder(&name(&names.wake))
+            .event()
+            .open()
+            .expect("open wake")
+            .notifier_builder()
+            .create()
+            .expect("wake notifier");
+        RawClient { _node: node, rendezvous, map, wake }
+    }
+
+    /// Sends a rendezvous request as is and returns the reply.
+    pub fn rendezvous(&self, header: RendezvousRequestHeader, records: &[WireDelta]) -> RendezvousReply {
+        let mut loan = self.rendezvous.loan_slice_uninit(records.len()).expect("loan");
+        *loan.user_header_mut() = header;
+        let pending = loan.write_from_slice(records).send().expect("send");
+        self.wake.notify().expect("notify");
+        wait_for("a rendezvous reply", || pending.receive().expect("receive").map(|r| *r.payload()))
+    }
+
+    /// Sends a map request as is and returns the reply header and records.
+    pub fn map(&self, header: MapRequestHeader, records: &[WireDelta]) -> (MapReplyHeader, Vec<WireDelta>) {
+        let mut loan = self.map.loan_slice_uninit(records.len()).expect("loan");
+        *loan.user_header_mut() = header;
+        let pending = loan.write_from_slice(records).send().expect("send");
+        self.wake.notify().expect("notify");
+        wait_for("a map reply", || {
+            pending.receive().expect("receive").map(|r| (*r.user_header(), r.payload().to_vec()))
+        })
+    }
+}

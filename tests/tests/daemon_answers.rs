@@ -1,0 +1,244 @@
+//! The daemon answers as the offline library does, to several processes at once.
+
+use dyfos_client::prelude::*;
+use dyfos_service::search::SearchControl;
+use dyfos_shared::answer::StopReason;
+use dyfos_shared::world::VerticalCylinder;
+use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, bin, data, wait_for, without_micros};
+use std::process::{Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+fn scenario(path: &str) -> Scenario {
+    Scenario::from_json(&std::fs::read_to_string(data(path)).expect("scenario file")).expect("valid scenario")
+}
+
+fn offline(world: &World, s: &Scenario, request: &RendezvousRequest) -> Result<Answer, dyfos_service::SearchError> {
+    let model = NoiseModel::from_params(&request.params).expect("model");
+    let control = SearchControl { budget: request.budget, ..SearchControl::seeded(request.seed) };
+    dyfos_service::solve(world, &s.belief, &request.params, &model, request.algorithm, &control)
+}
+
+/// Bit for bit: the JSON text, where every f64 is printed exactly (and -0.0 ≠ 0.0).
+fn text(answer: &Answer) -> String {
+    without_micros(answer.to_json()).to_string()
+}
+
+#[test]
+fn daemon_answers_equal_the_offline_library_bit_for_bit() {
+    let sandbox = Sandbox::new("bits");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let mut compared = 0;
+    for (map, file) in [(1, "example.json"), (2, "golden/scenarios/numerical/map_00.json")] {
+        let s = scenario(file);
+        assert_eq!(client.upload_map(map, &s.world, false, PATIENCE).unwrap(), 0);
+        let cases = [
+            (Algorithm::Dyfos, None),
+            (Algorithm::DyfosScipy, None),
+            (Algorithm::Random, None),
+            (Algorithm::Center, None),
+            (Algorithm::Brute, Some(20_000)),
+        ];
+        for (algorithm, budget) in cases {
+            for seed in [0, 7] {
+                for model in [ModelKind::Paper, ModelKind::Anisotropic] {
+                    let params = Params { model, ..s.params };
+                    let request =
+                        RendezvousRequest { algorithm, seed, budget, params, ..RendezvousRequest::new(map, s.belief) };
+                    let got = client.rendezvous(&request, PATIENCE);
+                    match (got, offline(&s.world, &s, &request)) {
+                        (Ok(d), Ok(o)) => {
+                            assert_eq!(text(&d), text(&o), "{file} {algorithm} seed {seed} {model:?}");
+                            compared += 1;
+                        }
+                        (Err(e), Err(_)) => assert_eq!(e.status(), Some(Status::NoFeasiblePose), "{e}"),
+                        (d, o) => panic!("daemon {d:?} vs offline {o:?}"),
+                    }
+                }
+            }
+        }
+    }
+    assert!(compared >= 30, "only {compared} answers compared");
+}
+
+#[test]
+fn inline_deltas_are_applied_before_the_search_and_kept() {
+    let sandbox = Sandbox::new("inline");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let s = scenario("example.json");
+    client.upload_map(5, &s.world, false, PATIENCE).unwrap();
+    let pole = Obstacle::Cylinder(VerticalCylinder { center: na::Point2::new(-1.5, 0.5), radius: 0.4, height: 9.0 });
+    let deltas =
+        vec![MapDelta::UpsertObstacle { id: 77, obstacle: pole }, MapDelta::SetSun(Sun::new(0.4, -2.0).unwrap())];
+    let request = RendezvousRequest {
+        expected_version: Some(0),
+        deltas: deltas.clone(),
+        seed: 3,
+        ..RendezvousRequest::new(5, s.belief)
+    };
+    // Check mode validates the deltas on a copy: nothing changes.
+    assert_eq!(client.check(&request, PATIENCE).unwrap().map_version, 2);
+    assert_eq!(client.snapshot(5, PATIENCE).unwrap().version(), 0);
+    let answer = client.rendezvous(&request, PATIENCE).unwrap();
+    assert_eq!(answer.map_version, 2);
+    let changed = s.world.apply(&deltas).unwrap();
+    assert_eq!(text(&answer), text(&offline(&changed, &s, &request).unwrap()));
+    let stored = client.snapshot(5, PATIENCE).unwrap();
+    assert_eq!(stored, changed);
+    // The same request again now fails: the map moved on.
+    let err = client.rendezvous(&request, PATIENCE).unwrap_err();
+    assert_eq!(err.status(), Some(Status::MapVersionMismatch), "{err}");
+}
+
+#[test]
+fn a_deadline_returns_the_best_pose_so_far_flagged() {
+    let sandbox = Sandbox::new("deadline");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let s = scenario("golden/scenarios/numerical/map_00.json");
+    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let request = RendezvousRequest {
+        algorithm: Algorithm::Brute,
+        deadline: Some(Duration::from_millis(30)),
+        ..RendezvousRequest::new(1, s.belief)
+    };
+    match client.rendezvous(&request, PATIENCE) {
+        Ok(answer) => {
+            assert_eq!(answer.stop, StopReason::Deadline);
+            assert!(answer.cost.is_finite());
+            assert!(answer.evaluations.total < 25 * 17 * 13 * 72);
+        }
+        Err(e) => assert_eq!(e.status(), Some(Status::DeadlineExceeded), "{e}"),
+    }
+}
+
+#[test]
+fn several_client_processes_at_once_and_the_examples() {
+    let sandbox = Sandbox::new("procs");
+    let _daemon = sandbox.start_daemon(&[]);
+    let file = data("example.json");
+    let seeds = [0u64, 1, 2, 3];
+    let queries: Vec<ChildGuard> = seeds
+        .iter()
+        .map(|seed| {
+            let child = Command::new(bin("dyfos"))
+                .arg("query")
+                .arg(&file)
+                .args(["--seed", &seed.to_string()])
+                .args(sandbox.dyfos_flags())
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("start dyfos query");
+            ChildGuard(child)
+        })
+        .collect();
+    let examples: Vec<(&str, ChildGuard)> = ["rendezvous_once", "map_delta"]
+        .into_iter()
+        .map(|name| {
+            let child = Command::new(bin(&format!("examples/{name}")))
+                .args([&sandbox.prefix, &sandbox.domain])
+                .stdout(Stdio::piped())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("start example");
+            (name, ChildGuard(child))
+        })
+        .collect();
+    let s = scenario("example.json");
+    for (seed, mut q) in seeds.into_iter().zip(queries) {
+        let out = q.0.wait_with_output_guarded();
+        assert!(out.status.success(), "dyfos query --seed {seed}: {}", String::from_utf8_lossy(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON answer");
+        let request = RendezvousRequest { seed, params: s.params, ..RendezvousRequest::new(0, s.belief) };
+        let expected = offline(&s.world, &s, &request).unwrap();
+        assert_eq!(without_micros(json).to_string(), text(&expected), "seed {seed}");
+    }
+    for (name, mut child) in examples {
+        let out = child.0.wait_with_output_guarded();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{name}: {}{stdout}", String::from_utf8_lossy(&out.stderr));
+        match name {
+            "rendezvous_once" => assert!(stdout.starts_with("viewer at ("), "{stdout}"),
+            _ => {
+                assert!(stdout.contains("rejected as expected: ") && stdout.contains("still at version 3"), "{stdout}")
+            }
+        }
+    }
+}
+
+#[test]
+fn dyfos_query_prints_what_dyfos_solve_prints() {
+    let sandbox = Sandbox::new("cli");
+    let _daemon = sandbox.start_daemon(&[]);
+    let file = data("golden/scenarios/numerical/map_01.json");
+    let run = |args: &[&str], online: bool| {
+        let mut cmd = Command::new(bin("dyfos"));
+        cmd.arg(if online { "query" } else { "solve" }).arg(&file).args(args);
+        if online {
+            cmd.args(sandbox.dyfos_flags());
+        }
+        let out = cmd.output().expect("run dyfos");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+        without_micros(json).to_string()
+    };
+    for args in [&["--seed", "5"][..], &["--algo", "center", "--seed", "9"][..]] {
+        assert_eq!(run(args, true), run(args, false), "{args:?}");
+    }
+    let stats = Command::new(bin("dyfos")).arg("stats").args(sandbox.dyfos_flags()).output().unwrap();
+    let stats: serde_json::Value = serde_json::from_slice(&stats.stdout).expect("stats JSON");
+    assert_eq!(stats["queries_served"], 2);
+    assert_eq!(stats["maps"], 1);
+}
+
+#[test]
+fn a_slow_brute_query_does_not_hold_up_a_cheap_one() {
+    let sandbox = Sandbox::new("fair");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let s = scenario("golden/scenarios/hard/hard_00.json");
+    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let brute_done = Arc::new(AtomicBool::new(false));
+    let brute = {
+        let mut slow = sandbox.client();
+        let done = Arc::clone(&brute_done);
+        let request = RendezvousRequest { algorithm: Algorithm::Brute, ..RendezvousRequest::new(1, s.belief) };
+        std::thread::spawn(move || {
+            let answer = slow.rendezvous(&request, PATIENCE);
+            done.store(true, Ordering::SeqCst);
+            answer
+        })
+    };
+    wait_for("the brute query to start", || (client.stats(PATIENCE).unwrap().running >= 1).then_some(()));
+    let cheap = RendezvousRequest { algorithm: Algorithm::Center, seed: 1, ..RendezvousRequest::new(1, s.belief) };
+    let answer = client.rendezvous(&cheap, PATIENCE);
+    assert!(!brute_done.load(Ordering::SeqCst), "the cheap query waited for the brute one");
+    assert!(answer.is_ok() || answer.as_ref().unwrap_err().status() == Some(Status::NoFeasiblePose), "{answer:?}");
+    let brute = brute.join().unwrap().unwrap();
+    assert_eq!(brute.algorithm, Algorithm::Brute);
+}
+
+/// `wait_with_output` for a child owned by a guard.
+trait WaitGuarded {
+    fn wait_with_output_guarded(&mut self) -> std::process::Output;
+}
+
+impl WaitGuarded for std::process::Child {
+    fn wait_with_output_guarded(&mut self) -> std::process::Output {
+        use std::io::Read;
+        let mut stdout = Vec::new();
+        let mut stderr = Vec::new();
+        if let Some(mut o) = self.stdout.take() {
+            o.read_to_end(&mut stdout).unwrap();
+        }
+        if let Some(mut e) = self.stderr.take() {
+            e.read_to_end(&mut stderr).unwrap();
+        }
+        let status = self.wait().unwrap();
+        std::process::Output { status, stdout, stderr }
+    }
+}

@@ -1,0 +1,127 @@
+//! Crashes, restarts, dying clients and clean shutdown.
+
+use dyfos_client::prelude::*;
+use dyfos_shared::answer::StopReason;
+use dyfos_shared::world::VerticalCylinder;
+use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, bin, data, signal, wait_for};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+fn scenario(path: &str) -> Scenario {
+    Scenario::from_json(&std::fs::read_to_string(data(path)).unwrap()).unwrap()
+}
+
+#[test]
+fn kill_9_and_restart_keeps_the_maps_and_clients_reconnect() {
+    let sandbox = Sandbox::new("restart");
+    let mut daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let s = scenario("golden/scenarios/numerical/map_00.json");
+    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let pole = Obstacle::Cylinder(VerticalCylinder { center: na::Point2::new(0.0, 5.0), radius: 0.3, height: 2.0 });
+    client.apply(1, Some(0), &[MapDelta::UpsertObstacle { id: 500, obstacle: pole }], PATIENCE).unwrap();
+    let bounds = Bounds::new([0.0, 0.0, 30.0, 30.0]).unwrap();
+    client.create_map(2, bounds, Sun::new(-0.2, 0.0).unwrap(), PATIENCE).unwrap();
+    let map1 = client.snapshot(1, PATIENCE).unwrap();
+    let map2 = client.snapshot(2, PATIENCE).unwrap();
+    assert_eq!(map1.version(), 1);
+
+    daemon.kill9();
+    let err = client.stats(Duration::from_secs(10)).unwrap_err();
+    assert!(err.is_retryable(), "a dead daemon is a retryable error, got: {err}");
+
+    // A corrupt map file must not stop the next start.
+    std::fs::write(sandbox.state_dir.join("map-9.bin"), b"not a map").unwrap();
+    let daemon = sandbox.start_daemon(&[]);
+    // The same client reconnects by itself, and the maps came back.
+    assert_eq!(client.snapshot(1, PATIENCE).unwrap(), map1);
+    assert_eq!(client.snapshot(2, PATIENCE).unwrap(), map2);
+    let request = RendezvousRequest { seed: 4, params: s.params, ..RendezvousRequest::new(1, s.belief) };
+    assert_eq!(client.rendezvous(&request, PATIENCE).unwrap().map_version, 1);
+    let err = client.snapshot(9, PATIENCE).unwrap_err();
+    assert_eq!(err.status(), Some(Status::UnknownMap));
+    let quarantined: Vec<_> = std::fs::read_dir(&sandbox.state_dir)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with("map-9.bin.corrupt-"))
+        .collect();
+    assert_eq!(quarantined.len(), 1);
+    assert!(daemon.log().contains("quarantined"), "{}", daemon.log());
+
+    // The new daemon holds the only server port: the killed one's was cleaned up,
+    // and a clean stop now leaves nothing of either behind.
+    drop(client);
+    let mut daemon = daemon;
+    assert!(daemon.terminate().success());
+    assert_eq!(sandbox.shm_leftovers(), Vec::<String>::new());
+}
+
+#[test]
+fn a_second_daemon_on_the_same_prefix_refuses_to_start() {
+    let sandbox = Sandbox::new("twice");
+    let _daemon = sandbox.start_daemon(&[]);
+    let out = Command::new(bin("dyfosd"))
+        .args(["--prefix", &sandbox.prefix, "--domain", &sandbox.domain, "--state-dir"])
+        .arg(sandbox.state_dir.join("second"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("another dyfosd already serves prefix"), "{stderr}");
+}
+
+#[test]
+fn killing_a_client_mid_query_does_not_disturb_the_others() {
+    let sandbox = Sandbox::new("clientkill");
+    let daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let file = data("golden/scenarios/hard/hard_01.json");
+    let s = scenario("golden/scenarios/hard/hard_01.json");
+    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let child = Command::new(bin("dyfos"))
+        .arg("query")
+        .arg(&file)
+        .args(["--algo", "brute", "--map", "1"])
+        .args(sandbox.dyfos_flags())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut child = ChildGuard(child);
+    wait_for("the doomed brute query to run", || (client.stats(PATIENCE).unwrap().running >= 1).then_some(()));
+    signal(child.0.id(), "KILL");
+    let _ = child.0.wait();
+
+    // Others are served while (and after) the orphaned query runs.
+    let request = RendezvousRequest { seed: 2, params: s.params, ..RendezvousRequest::new(1, s.belief) };
+    let first = client.rendezvous(&request, PATIENCE);
+    assert!(first.is_ok() || first.as_ref().unwrap_err().status() == Some(Status::NoFeasiblePose), "{first:?}");
+    wait_for("the orphaned query to end", || (client.stats(PATIENCE).unwrap().running == 0).then_some(()));
+    let mut other = sandbox.client();
+    let again = other.rendezvous(&request, PATIENCE);
+    assert_eq!(format!("{first:?}").replace(char::is_numeric, ""), format!("{again:?}").replace(char::is_numeric, ""));
+    assert!(daemon.log().contains("dyfosd ready"));
+}
+
+#[test]
+fn sigterm_finishes_in_flight_queries_and_leaves_no_shared_memory() {
+    let sandbox = Sandbox::new("sigterm");
+    let mut daemon = sandbox.start_daemon(&[]);
+    let s = scenario("golden/scenarios/numerical/map_02.json");
+    let mut client = sandbox.client();
+    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let in_flight = {
+        let mut slow = sandbox.client();
+        let request =
+            RendezvousRequest { algorithm: Algorithm::Brute, params: s.params, ..RendezvousRequest::new(1, s.belief) };
+        std::thread::spawn(move || slow.rendezvous(&request, PATIENCE))
+    };
+    wait_for("the brute query to run", || (client.stats(PATIENCE).unwrap().running >= 1).then_some(()));
+    drop(client);
+    assert!(daemon.terminate().success(), "{}", daemon.log());
+    let answer = in_flight.join().unwrap().expect("the query in flight is answered before the daemon exits");
+    assert_eq!(answer.stop, StopReason::Finished);
+    let log = daemon.log();
+    assert!(log.contains("shutting down") && log.contains("dyfosd stopped"), "{log}");
+    assert_eq!(sandbox.shm_leftovers(), Vec::<String>::new());
+}
