@@ -135,6 +135,8 @@ pub struct Lupp<'a> {
     sun: Vector3<f64>,
     /// p_t, then the perimeter points (SPEC §2 order).
     targets: Vec<Point3<f64>>,
+    /// The belief's mean heading θ (for the `learned` model's relative bearing).
+    heading: f64,
     reach: f64,
 }
 
@@ -160,6 +162,7 @@ impl<'a> Lupp<'a> {
             space: SearchSpace::new(params),
             sun: world.sun().direction(),
             targets,
+            heading: theta,
             reach: params.viewer_radius + params.safety_margin,
         }
     }
@@ -191,7 +194,14 @@ impl<'a> Lupp<'a> {
 
     #[inline]
     fn noise(&self, pose: &SensorPose) -> Cov2 {
-        self.model.noise(&Features::new(&self.params, &self.sun, pose, &self.targets[0]))
+        self.model.noise(&self.features(pose))
+    }
+
+    /// The SDSMM features of observing the rover from `pose` (SPEC §6), with the
+    /// belief's mean heading.
+    #[inline]
+    pub fn features(&self, pose: &SensorPose) -> Features {
+        Features::new(&self.params, &self.sun, pose, &self.targets[0]).with_rover_heading(self.heading)
     }
 
     #[inline]
@@ -245,7 +255,7 @@ impl<'a> Lupp<'a> {
             }
             _ => Vec::new(),
         };
-        let features = Features::new(&self.params, &self.sun, &pose, &self.targets[0]);
+        let features = self.features(&pose);
         let r = self.model.noise(&features);
         Prediction { x: *x, pose, evaluation, blockers, features, r, posterior: self.prior.posterior(&r) }
     }

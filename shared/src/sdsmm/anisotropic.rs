@@ -27,7 +27,18 @@ mod tests {
     #[test]
     fn equals_the_rotated_diagonal_form() {
         let w = Vector3::new(0.3, -0.5, 0.7).normalize();
-        let f = Features { u: 0.1, v: 0.2, e: 0.2, s: 0.4, c: 0.5, w, elevation: 0.0, bearing: 0.0, rho: 3.0 };
+        let f = Features {
+            u: 0.1,
+            v: 0.2,
+            e: 0.2,
+            s: 0.4,
+            c: 0.5,
+            w,
+            elevation: 0.0,
+            bearing: 0.0,
+            rho: 3.0,
+            rover_heading: 0.0,
+        };
         let elevation = w.z.atan2(w.x.hypot(w.y));
         let beta = (-w.y).atan2(-w.x); // sensor → rover is −w
         let (sb, cb) = beta.sin_cos();

@@ -24,14 +24,22 @@
 //! ```
 
 mod anisotropic;
+mod learned;
 mod paper;
+mod synthetic;
 
 pub use anisotropic::Anisotropic;
+pub use learned::{
+    LEARNED_INPUTS, LEARNED_OUTPUTS, LOG_STD_RANGE, Learned, LearnedModelError, LearnedWeights, MAX_HIDDEN,
+    learned_input, noise_from_outputs,
+};
 pub use paper::{Paper, paper_variance};
+pub use synthetic::Synthetic;
 
 use crate::math::{Cov2, Point3, Vector3};
 use crate::params::{ModelKind, Params};
 use crate::sensor::SensorPose;
+use std::sync::Arc;
 
 /// The predictable features of one measurement (SPEC §6).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -54,6 +62,11 @@ pub struct Features {
     pub bearing: f64,
     /// Distance ρ from the sensor to the marker, m.
     pub rho: f64,
+    /// The rover's heading θ, rad: 0 from [`Features::new`], set by
+    /// [`Features::with_rover_heading`]. Only the `learned` model (and the synthetic
+    /// reference model it is trained against) reads it, as the bearing relative to the
+    /// rover, `β − θ`; `paper` and `anisotropic` ignore it.
+    pub rover_heading: f64,
 }
 
 impl Features {
@@ -78,7 +91,21 @@ impl Features {
         };
         let elevation = w.z.atan2(w.x.hypot(w.y));
         let bearing = (target.y - pose.position.y).atan2(target.x - pose.position.x);
-        Features { u, v, e, s, c, w, elevation, bearing, rho }
+        Features { u, v, e, s, c, w, elevation, bearing, rho, rover_heading: 0.0 }
+    }
+
+    /// The same features for a rover heading `theta` (rad): the belief's mean heading
+    /// when predicting, the true heading when simulating.
+    #[inline]
+    pub fn with_rover_heading(self, theta: f64) -> Self {
+        Features { rover_heading: theta, ..self }
+    }
+
+    /// The bearing from the sensor to the rover relative to the rover's heading,
+    /// `β − θ` wrapped into [−π, π).
+    #[inline]
+    pub fn relative_bearing(&self) -> f64 {
+        crate::math::wrap_angle(self.bearing - self.rover_heading)
     }
 }
 
@@ -88,13 +115,19 @@ pub trait Sdsmm {
     fn noise(&self, features: &Features) -> Cov2;
 }
 
-/// The model a request chose (SPEC §6), dispatched statically.
+/// The model a request chose (SPEC §6), dispatched statically. Cheap to clone
+/// (learned weights are shared), `Send + Sync`.
 #[derive(Debug, Clone, PartialEq)]
 pub enum NoiseModel {
     /// The paper's isotropic model.
     Paper(Paper),
     /// The line-of-sight stretched model.
     Anisotropic(Anisotropic),
+    /// A trained network, weights loaded from a model file.
+    Learned(Arc<Learned>),
+    /// The synthetic reference camera the learned model is trained against and judged
+    /// by; for experiments only (scenario files cannot name it).
+    Synthetic(Synthetic),
 }
 
 /// A model that cannot be built from the parameters.
@@ -106,12 +139,22 @@ pub enum NoiseModelError {
 }
 
 impl NoiseModel {
-    /// The model named by `params.model`, with its parameters.
+    /// The model named by `params.model`, with its parameters. `learned` needs
+    /// weights: see [`NoiseModel::from_params_and_weights`].
     pub fn from_params(params: &Params) -> Result<Self, NoiseModelError> {
+        Self::from_params_and_weights(params, None)
+    }
+
+    /// The model named by `params.model`; `learned` uses `weights` (loaded once, shared
+    /// by every clone). Weights given for another model are not used.
+    pub fn from_params_and_weights(params: &Params, weights: Option<&Arc<Learned>>) -> Result<Self, NoiseModelError> {
         match params.model {
             ModelKind::Paper => Ok(NoiseModel::Paper(Paper)),
             ModelKind::Anisotropic => Ok(NoiseModel::Anisotropic(Anisotropic { lambda: params.lambda })),
-            ModelKind::Learned => Err(NoiseModelError::LearnedWithoutWeights),
+            ModelKind::Learned => match weights {
+                Some(w) => Ok(NoiseModel::Learned(Arc::clone(w))),
+                None => Err(NoiseModelError::LearnedWithoutWeights),
+            },
         }
     }
 }
@@ -122,6 +165,8 @@ impl Sdsmm for NoiseModel {
         match self {
             NoiseModel::Paper(m) => m.noise(features),
             NoiseModel::Anisotropic(m) => m.noise(features),
+            NoiseModel::Learned(m) => m.noise(features),
+            NoiseModel::Synthetic(m) => m.noise(features),
         }
     }
 }
