@@ -28,6 +28,13 @@
 mod client;
 mod error;
 
+pub mod eval;
+pub mod mission;
+pub mod rover;
+pub mod shutdown;
+pub mod sim;
+pub mod viewer;
+
 pub use client::{Client, ClientConfig};
 pub use dyfos_shared::wire::rendezvous::{RendezvousCheck, RendezvousRequest};
 pub use dyfos_shared::wire::stats::DaemonStats;

@@ -26,7 +26,7 @@
 #![allow(unsafe_code)] // SAFETY: only `#[derive(ZeroCopySend)]` below, on `#[repr(C)]` structs of plain numbers.
 
 use crate::limits::MAX_COORDINATE;
-use crate::math::{Cov2, Cov3, CovarianceError};
+use crate::math::{Cov2, CovarianceError};
 use crate::posterior::{Belief, BeliefError};
 use iceoryx2::prelude::ZeroCopySend;
 

@@ -1,0 +1,100 @@
+//! `dyfos-rover`: a simulated perception-denied rover playing the paper's rendezvous
+//! loop (SPEC §9) with a `dyfos-viewer`. A thin layer over [`dyfos_client::rover`].
+//!
+//! Exit codes: 0 at the goal; 2 for bad flags or a bad mission file; 1 otherwise
+//! (no viewer, stopped by a signal, iceoryx2 failure).
+
+use anyhow::Context;
+use clap::Parser;
+use dyfos_client::mission::Mission;
+use dyfos_client::mission::topics::TopicsConfig;
+use dyfos_client::rover::{RoverConfig, run_rover};
+use dyfos_client::shutdown;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// A simulated rover with no exteroception: dead-reckons between waypoints and asks
+/// a viewer to measure it at each one.
+#[derive(Debug, Parser)]
+#[command(name = "dyfos-rover", version, about, long_about = None)]
+struct Cli {
+    /// Service-name prefix of the daemon and the mission topics.
+    #[arg(long, default_value = dyfos_client::DEFAULT_PREFIX)]
+    prefix: String,
+    /// iceoryx2 domain (file prefix), as given to `dyfosd --domain`.
+    #[arg(long)]
+    domain: Option<String>,
+    /// Mission name: the rover and its viewer must use the same.
+    #[arg(long, default_value = "default")]
+    mission_name: String,
+    /// Mission file (scenario + waypoints, see `dyfos_client::mission`); default: the built-in mission.
+    #[arg(long)]
+    mission: Option<PathBuf>,
+    /// Seed of the true start pose and of the wheel slip.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Simulated seconds per wall second; 0 runs as fast as possible.
+    #[arg(long, default_value_t = 20.0)]
+    time_scale: f64,
+    /// Longest wait for a measurement at a waypoint, wall seconds.
+    #[arg(long, default_value_t = 10.0)]
+    measurement_timeout: f64,
+    /// Longest wait at the start for a viewer, wall seconds.
+    #[arg(long, default_value_t = 10.0)]
+    viewer_timeout: f64,
+    /// Drive without a viewer (no rendezvous, no measurements): the baseline.
+    #[arg(long)]
+    dead_reckoning: bool,
+    /// Write every event as a JSON line to this file.
+    #[arg(long)]
+    events: Option<PathBuf>,
+}
+
+fn seconds(name: &str, v: f64) -> anyhow::Result<Duration> {
+    Duration::try_from_secs_f64(v).map_err(|_| anyhow::anyhow!("--{name} = {v} must be a number of seconds ≥ 0"))
+}
+
+fn config(cli: &Cli) -> anyhow::Result<RoverConfig> {
+    let mission = Mission::load(cli.mission.as_deref())?;
+    if !(cli.time_scale.is_finite() && cli.time_scale >= 0.0) {
+        anyhow::bail!("--time-scale = {} must be ≥ 0 (0: as fast as possible)", cli.time_scale);
+    }
+    let topics =
+        TopicsConfig { prefix: cli.prefix.clone(), domain: cli.domain.clone(), mission: cli.mission_name.clone() };
+    Ok(RoverConfig {
+        time_scale: (cli.time_scale > 0.0).then_some(cli.time_scale),
+        measurement_timeout: seconds("measurement-timeout", cli.measurement_timeout)?,
+        viewer_timeout: seconds("viewer-timeout", cli.viewer_timeout)?,
+        dead_reckoning: cli.dead_reckoning,
+        events: cli.events.clone(),
+        ..RoverConfig::new(topics, mission, cli.seed)
+    })
+}
+
+fn init_logging() {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_logging();
+    let config = match config(&cli) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("dyfos-rover: {e:#}");
+            return ExitCode::from(2);
+        }
+    };
+    shutdown::install();
+    match run_rover(&config, &shutdown::requested).context("mission failed") {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("dyfos-rover: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

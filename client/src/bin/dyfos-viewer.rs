@@ -1,0 +1,130 @@
+//! `dyfos-viewer`: a simulated flying viewer that asks `dyfosd` where to put its
+//! camera for each of the rover's rendezvous, flies there and measures the rover
+//! (SPEC §9). A thin layer over [`dyfos_client::viewer`].
+//!
+//! Exit codes: 0 when the rover finishes; 2 for bad flags or a bad mission file;
+//! 1 otherwise (no daemon, no rover, stopped by a signal).
+
+use anyhow::Context;
+use clap::Parser;
+use dyfos_client::ClientConfig;
+use dyfos_client::mission::Mission;
+use dyfos_client::mission::topics::TopicsConfig;
+use dyfos_client::shutdown;
+use dyfos_client::viewer::{ViewerConfig, run_viewer};
+use dyfos_shared::answer::Algorithm;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// A simulated viewer: finds the optimal sensor pose with dyfosd, flies there and
+/// measures the rover.
+#[derive(Debug, Parser)]
+#[command(name = "dyfos-viewer", version, about, long_about = None)]
+struct Cli {
+    /// Service-name prefix of the daemon and the mission topics.
+    #[arg(long, default_value = dyfos_client::DEFAULT_PREFIX)]
+    prefix: String,
+    /// iceoryx2 domain (file prefix), as given to `dyfosd --domain`.
+    #[arg(long)]
+    domain: Option<String>,
+    /// Mission name: the viewer and its rover must use the same.
+    #[arg(long, default_value = "default")]
+    mission_name: String,
+    /// Mission file (scenario + waypoints, see `dyfos_client::mission`); default: the built-in mission.
+    #[arg(long)]
+    mission: Option<PathBuf>,
+    /// Search algorithm: dyfos, dyfos-scipy, brute, random or center.
+    #[arg(long, default_value = "dyfos", value_parser = parse_algorithm)]
+    algo: Algorithm,
+    /// Seed of the searches and of the camera noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The daemon map id this viewer owns (uploaded at start, replacing any map with this id).
+    #[arg(long, default_value_t = 1)]
+    map_id: u64,
+    /// Simulated seconds per wall second; 0 runs as fast as possible.
+    #[arg(long, default_value_t = 20.0)]
+    time_scale: f64,
+    /// Longest wait for the daemon's answer, wall seconds.
+    #[arg(long, default_value_t = 30.0)]
+    query_timeout: f64,
+    /// Deadline given to the daemon per query, seconds (the best pose so far when it passes).
+    #[arg(long, default_value_t = 20.0)]
+    deadline: f64,
+    /// Longest wait for the rover to reach a rendezvous, wall seconds.
+    #[arg(long, default_value_t = 10.0)]
+    observe_timeout: f64,
+    /// Exit after this many wall seconds without a word from the rover.
+    #[arg(long, default_value_t = 120.0)]
+    idle_timeout: f64,
+    /// Longest wait for the daemon at start, wall seconds.
+    #[arg(long, default_value_t = 10.0)]
+    connect_timeout: f64,
+    /// Write every event as a JSON line to this file.
+    #[arg(long)]
+    events: Option<PathBuf>,
+}
+
+fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
+    Algorithm::from_name(s).ok_or_else(|| {
+        let names: Vec<_> = Algorithm::ALL.iter().map(|a| a.name()).collect();
+        format!("unknown algorithm `{s}`; choose one of {}", names.join(", "))
+    })
+}
+
+fn seconds(name: &str, v: f64) -> anyhow::Result<Duration> {
+    Duration::try_from_secs_f64(v).map_err(|_| anyhow::anyhow!("--{name} = {v} must be a number of seconds ≥ 0"))
+}
+
+fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
+    let mission = Mission::load(cli.mission.as_deref())?;
+    if !(cli.time_scale.is_finite() && cli.time_scale >= 0.0) {
+        anyhow::bail!("--time-scale = {} must be ≥ 0 (0: as fast as possible)", cli.time_scale);
+    }
+    let topics =
+        TopicsConfig { prefix: cli.prefix.clone(), domain: cli.domain.clone(), mission: cli.mission_name.clone() };
+    let client = ClientConfig {
+        prefix: cli.prefix.clone(),
+        domain: cli.domain.clone(),
+        connect_timeout: seconds("connect-timeout", cli.connect_timeout)?,
+        ..ClientConfig::default()
+    };
+    Ok(ViewerConfig {
+        map_id: cli.map_id,
+        time_scale: (cli.time_scale > 0.0).then_some(cli.time_scale),
+        query_timeout: seconds("query-timeout", cli.query_timeout)?,
+        query_deadline: Some(seconds("deadline", cli.deadline)?).filter(|d| !d.is_zero()),
+        observe_timeout: seconds("observe-timeout", cli.observe_timeout)?,
+        idle_timeout: seconds("idle-timeout", cli.idle_timeout)?,
+        events: cli.events.clone(),
+        ..ViewerConfig::new(client, topics, mission, cli.algo, cli.seed)
+    })
+}
+
+fn init_logging() {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_logging();
+    let config = match config(&cli) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("dyfos-viewer: {e:#}");
+            return ExitCode::from(2);
+        }
+    };
+    shutdown::install();
+    match run_viewer(&config, &shutdown::requested).context("viewer failed") {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("dyfos-viewer: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}

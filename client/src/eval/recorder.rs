@@ -1,0 +1,135 @@
+//! The evaluation's listener: ground truth, estimates and measurements of one
+//! mission, as they are published.
+
+use super::ApeStats;
+use crate::mission::topics::{Inbox, MAX_BUFFER, TopicOpenError, Topics, TopicsConfig};
+use crate::rover::{MISSION, SIM};
+use dyfos_shared::wire::mission::{
+    ESTIMATE_TOPIC, Estimate, EstimateMsg, MEASUREMENT_TOPIC, Measurement, MeasurementMsg, Phase, TRUTH_TOPIC,
+    TrueState, TrueStateMsg,
+};
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+/// Everything recorded of one mission.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MissionTrace {
+    /// Ground-truth samples, in arrival order.
+    pub truth: Vec<TrueState>,
+    /// The rover's estimates, in arrival order.
+    pub estimates: Vec<Estimate>,
+    /// The viewer's measurements (and non-measurements), in arrival order.
+    pub measurements: Vec<Measurement>,
+    /// Messages that failed to decode.
+    pub malformed: usize,
+}
+
+impl MissionTrace {
+    /// Truth and estimate of the same instant, by sample number (samples missing on
+    /// either side are left out).
+    pub fn pairs(&self) -> Vec<(TrueState, Estimate)> {
+        let truth: BTreeMap<u64, TrueState> = self.truth.iter().map(|t| (t.sample, *t)).collect();
+        let mut pairs: Vec<_> = self.estimates.iter().filter_map(|e| truth.get(&e.sample).map(|t| (*t, *e))).collect();
+        pairs.sort_by_key(|(t, _)| t.sample);
+        pairs
+    }
+
+    /// The absolute position error of every paired sample, m.
+    pub fn errors(&self) -> Vec<f64> {
+        self.pairs().iter().map(|(t, e)| (e.belief.mean.x - t.pose[0]).hypot(e.belief.mean.y - t.pose[1])).collect()
+    }
+
+    /// APE statistics over every paired sample.
+    pub fn ape(&self) -> Option<ApeStats> {
+        ApeStats::from_errors(&self.errors())
+    }
+
+    /// Whether the rover reported reaching its goal.
+    pub fn finished(&self) -> bool {
+        self.estimates.iter().any(|e| e.phase == Phase::Finished)
+    }
+
+    /// The waypoint the rover is at or heading for, as last reported.
+    pub fn step(&self) -> u32 {
+        self.estimates.last().map_or(0, |e| e.step)
+    }
+
+    /// How many estimates follow an update with a measurement.
+    pub fn updates(&self) -> usize {
+        self.estimates.iter().filter(|e| e.updated).count()
+    }
+}
+
+/// Subscribes to a mission's ground truth, estimates and measurements. Open it
+/// before the rover starts: what was published before is not replayed.
+pub struct Recorder {
+    _topics: Topics,
+    truth: Inbox<TrueStateMsg>,
+    estimate: Inbox<EstimateMsg>,
+    measurement: Inbox<MeasurementMsg>,
+    trace: MissionTrace,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recorder").field("samples", &self.trace.estimates.len()).finish()
+    }
+}
+
+impl Recorder {
+    /// Subscribes to the mission `config.mission`.
+    pub fn open(config: &TopicsConfig) -> Result<Self, TopicOpenError> {
+        let topics = Topics::open(config)?;
+        Ok(Recorder {
+            truth: topics.inbox(SIM, TRUTH_TOPIC, MAX_BUFFER)?,
+            estimate: topics.inbox(MISSION, ESTIMATE_TOPIC, MAX_BUFFER)?,
+            measurement: topics.inbox(MISSION, MEASUREMENT_TOPIC, 256)?,
+            _topics: topics,
+            trace: MissionTrace::default(),
+        })
+    }
+
+    /// Takes in everything published since the last poll; returns how many
+    /// messages arrived.
+    pub fn poll(&mut self) -> usize {
+        let mut n = 0;
+        for m in self.truth.drain() {
+            n += 1;
+            match TrueState::try_from(&m) {
+                Ok(t) => self.trace.truth.push(t),
+                Err(_) => self.trace.malformed += 1,
+            }
+        }
+        for m in self.estimate.drain() {
+            n += 1;
+            match Estimate::try_from(&m) {
+                Ok(e) => self.trace.estimates.push(e),
+                Err(_) => self.trace.malformed += 1,
+            }
+        }
+        for m in self.measurement.drain() {
+            n += 1;
+            match Measurement::try_from(&m) {
+                Ok(x) => self.trace.measurements.push(x),
+                Err(_) => self.trace.malformed += 1,
+            }
+        }
+        n
+    }
+
+    /// Sleeps until the rover publishes an estimate, at most `timeout`.
+    pub fn wait(&self, timeout: Duration) {
+        self.estimate.wait(timeout);
+    }
+
+    /// What has been recorded so far.
+    pub fn trace(&self) -> &MissionTrace {
+        &self.trace
+    }
+
+    /// Takes in what is left and returns the whole trace.
+    pub fn finish(mut self) -> MissionTrace {
+        self.poll();
+        self.trace
+    }
+}

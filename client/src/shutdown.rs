@@ -1,0 +1,36 @@
+//! Ctrl-C and SIGTERM for the mission processes: noticed, latched, never fatal, so
+//! that a process stops at its next check and closes its ports cleanly.
+//!
+//! ```
+//! dyfos_client::shutdown::install();
+//! assert!(!dyfos_client::shutdown::requested());
+//! ```
+
+use iceoryx2_bb_posix::signal::SignalHandler;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+static REQUESTED: AtomicBool = AtomicBool::new(false);
+
+/// Installs the SIGINT/SIGTERM handlers (idempotent). After this, those signals no
+/// longer kill the process: it must poll [`requested`].
+pub fn install() {
+    let _ = requested();
+}
+
+/// Whether SIGINT or SIGTERM arrived since [`install`]. Stays true once true.
+pub fn requested() -> bool {
+    if REQUESTED.load(Ordering::Relaxed) {
+        return true;
+    }
+    if SignalHandler::termination_requested() {
+        REQUESTED.store(true, Ordering::Relaxed);
+        return true;
+    }
+    false
+}
+
+/// Asks this process to stop, as a signal would (for callers that run a mission
+/// loop on a thread).
+pub fn request() {
+    REQUESTED.store(true, Ordering::Relaxed);
+}
