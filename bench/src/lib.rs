@@ -1,1 +1,25 @@
+//! # dyfos-bench
+//!
+//! Benchmarks and reproductions of the paper's evaluations, as a library the
+//! `dyfos-bench` binary (and the test suite) drive.
+//!
+//! - [`numerical`]: the seeded random maps of SPEC §10, with voxel variants;
+//! - [`evaluation`]: runs search algorithms over maps, tabulates cost E and run time;
+//! - [`scaling`]: `dyfos` query time as the map grows;
+//! - [`stats`], [`svg`]: summaries and plots for the reports.
+//!
+//! ```
+//! use dyfos_bench::evaluation::{Contender, evaluate};
+//! use dyfos_bench::numerical::{NumericalConfig, numerical_maps};
+//! use dyfos_shared::answer::Algorithm;
+//!
+//! let maps = numerical_maps(42, 1, &NumericalConfig::paper());
+//! let run = evaluate(&maps, &[Contender::algorithm(Algorithm::Dyfos, 1)], 42, 1);
+//! assert!(run.queries[0][0].feasible());
+//! ```
 
+pub mod evaluation;
+pub mod numerical;
+pub mod scaling;
+pub mod stats;
+pub mod svg;

@@ -1,0 +1,42 @@
+//! `dyfos-bench`: benchmarks and reproductions of the paper's evaluations. A thin
+//! layer over the `dyfos_bench` library: one subcommand per benchmark, each in its
+//! own module here (parse flags, call the library, print tables, write files).
+//!
+//! Add a benchmark by adding a module with an `Args` struct and a `run` function,
+//! and one variant to [`Command`].
+
+mod numerical;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Benchmarks and paper reproductions for dyfos.
+#[derive(Debug, Parser)]
+#[command(name = "dyfos-bench", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// The paper's numerical evaluation (SPEC §10): E and run time per algorithm on
+    /// seeded random maps, and query time as the map grows.
+    Numerical(numerical::NumericalArgs),
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Numerical(args) => numerical::run(&args),
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("dyfos-bench: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
