@@ -34,3 +34,12 @@ pub fn requested() -> bool {
 pub fn request() {
     REQUESTED.store(true, Ordering::Relaxed);
 }
+
+/// Asks another process to stop with SIGTERM; `false` if it does not exist (or
+/// may not be signalled).
+pub fn terminate(pid: u32) -> bool {
+    use iceoryx2_bb_posix::process::{Process, ProcessId};
+    use iceoryx2_bb_posix::signal::Signal;
+    let Ok(pid) = i32::try_from(pid) else { return false };
+    Process::from_pid(ProcessId::new(pid)).send_signal(Signal::Terminate).is_ok()
+}

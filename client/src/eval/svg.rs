@@ -10,7 +10,7 @@ use std::fmt::Write;
 
 const WIDTH: f64 = 720.0;
 const MARGIN: f64 = 20.0;
-const BAR: f64 = 110.0;
+const BAR: f64 = 170.0;
 const TITLE: f64 = 34.0;
 
 /// Viridis, sampled at 0, ¼, ½, ¾, 1.

@@ -4,6 +4,7 @@
 //! Exit codes: 0 success, 2 invalid input (the message names the field), 3 no
 //! feasible pose, 1 anything else.
 
+mod demo;
 mod offline;
 mod online;
 
@@ -20,6 +21,9 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Run the paper's simulated evaluation end to end: dyfosd, a rover and a viewer
+    /// per algorithm; print the APE table and write an SVG per algorithm.
+    Demo(demo::DemoArgs),
     /// Search a scenario file offline and print the answer as JSON.
     Solve(offline::SolveArgs),
     /// Evaluate one candidate x = (ρ, ψ, φ, ψ_v) of a scenario and print the verdict as JSON.
@@ -72,6 +76,7 @@ pub fn print_json(value: &serde_json::Value) {
 
 fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
+        Command::Demo(args) => demo::demo(&args),
         Command::Solve(args) => offline::solve(&args),
         Command::Eval(args) => offline::eval(&args),
         Command::Query(args) => online::query(&args),

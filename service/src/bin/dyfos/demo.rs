@@ -1,0 +1,456 @@
+//! `dyfos demo`: the paper's simulated evaluation (§V-B, SPEC §10) end to end.
+//!
+//! Starts `dyfosd` (its own service prefix and a temporary state directory), then
+//! for each algorithm a `dyfos-viewer` and a `dyfos-rover` process on the same
+//! mission with the same seeds, plus one rover without a viewer (dead reckoning)
+//! as the baseline. This process listens to the simulation's ground truth and the
+//! rover's estimate, prints the APE table of paper Table I and writes one SVG per
+//! algorithm in the style of paper Fig. 5. Every child is stopped on exit, on error
+//! and on Ctrl-C.
+
+use crate::Failure;
+use anyhow::{Context, anyhow, bail};
+use dyfos_client::eval::{ApeStats, MissionTrace, Recorder, mean_std, render_svg};
+use dyfos_client::mission::Mission;
+use dyfos_client::mission::topics::TopicsConfig;
+use dyfos_client::{Client, ClientConfig, shutdown};
+use dyfos_shared::answer::Algorithm;
+use dyfos_shared::wire::mission::Observation;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Flags of `dyfos demo`.
+#[derive(Debug, clap::Args)]
+pub struct DemoArgs {
+    /// Mission file: a SPEC §11 scenario plus waypoints (format in `dyfos_client::mission`).
+    /// Default: the built-in mission of SPEC §10 (25 cylinders, 10 waypoints).
+    #[arg(long)]
+    pub mission: Option<PathBuf>,
+    /// Algorithms to compare, comma-separated (dyfos, dyfos-scipy, brute, random, center).
+    #[arg(long, value_delimiter = ',', default_value = "dyfos,random,center", value_parser = crate::offline::parse_algorithm)]
+    pub algos: Vec<Algorithm>,
+    /// First seed; each run uses the same seeds for every algorithm.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Number of seeds (runs per algorithm): the table then shows mean ± std over seeds.
+    #[arg(long, default_value_t = 1)]
+    pub seeds: u64,
+    /// Simulated seconds per wall second; 0 runs as fast as the computer allows.
+    #[arg(long, default_value_t = 20.0)]
+    pub time_scale: f64,
+    /// Directory for the SVGs, a JSON summary and the processes' logs.
+    #[arg(long, default_value = "dyfos-demo")]
+    pub out: PathBuf,
+    /// Skip the dead-reckoning baseline (a rover without a viewer).
+    #[arg(long)]
+    pub no_baseline: bool,
+}
+
+/// One configuration of the table: an algorithm or the baseline.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Arm {
+    Viewer(Algorithm),
+    DeadReckoning,
+}
+
+impl Arm {
+    fn name(self) -> &'static str {
+        match self {
+            Arm::Viewer(a) => a.name(),
+            Arm::DeadReckoning => "dead-reckoning",
+        }
+    }
+}
+
+/// The binaries the demo starts, next to this executable.
+struct Binaries {
+    dyfosd: PathBuf,
+    rover: PathBuf,
+    viewer: PathBuf,
+}
+
+impl Binaries {
+    fn locate() -> anyhow::Result<Self> {
+        let exe = std::env::current_exe().context("cannot find this executable's path")?;
+        let dir = exe.parent().ok_or_else(|| anyhow!("{} has no directory", exe.display()))?;
+        let find = |name: &str| {
+            let p = dir.join(name);
+            if p.is_file() {
+                Ok(p)
+            } else {
+                Err(anyhow!(
+                    "`dyfos demo` needs `{name}` next to `dyfos` in {}; build every binary with `cargo build --release --workspace` and run ./target/release/dyfos demo",
+                    dir.display()
+                ))
+            }
+        };
+        Ok(Binaries { dyfosd: find("dyfosd")?, rover: find("dyfos-rover")?, viewer: find("dyfos-viewer")? })
+    }
+}
+
+/// A child process stopped when dropped: SIGTERM, a grace period, then SIGKILL.
+struct Proc {
+    name: String,
+    child: Option<Child>,
+}
+
+impl Proc {
+    fn spawn(name: &str, cmd: &mut Command, log: &Path) -> anyhow::Result<Proc> {
+        let file = std::fs::File::create(log).with_context(|| format!("cannot create {}", log.display()))?;
+        let child = cmd
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(file)
+            .spawn()
+            .with_context(|| format!("cannot start {name}"))?;
+        Ok(Proc { name: name.to_string(), child: Some(child) })
+    }
+
+    /// `Some(success)` once it has exited.
+    fn exited(&mut self) -> Option<bool> {
+        let c = self.child.as_mut()?;
+        match c.try_wait() {
+            Ok(Some(status)) => {
+                self.child = None;
+                Some(status.success())
+            }
+            Ok(None) => None,
+            Err(_) => Some(false),
+        }
+    }
+
+    fn running(&self) -> bool {
+        self.child.is_some()
+    }
+
+    /// SIGTERM, up to `grace` to exit, then SIGKILL. Returns whether it exited cleanly.
+    fn stop(&mut self, grace: Duration) -> bool {
+        let Some(mut c) = self.child.take() else { return true };
+        shutdown::terminate(c.id());
+        let start = Instant::now();
+        while start.elapsed() < grace {
+            if let Ok(Some(status)) = c.try_wait() {
+                return status.success();
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        tracing::warn!("{} did not stop within {grace:?}; killing it", self.name);
+        let _ = c.kill();
+        let _ = c.wait();
+        false
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        self.stop(Duration::from_secs(3));
+    }
+}
+
+/// What one run produced.
+struct RunResult {
+    arm: Arm,
+    seed: u64,
+    trace: MissionTrace,
+    ape: ApeStats,
+}
+
+/// Everything one demo needs, shared by its runs.
+struct Demo<'a> {
+    args: &'a DemoArgs,
+    bins: Binaries,
+    prefix: String,
+    logs: PathBuf,
+    mission_arg: Option<PathBuf>,
+    waypoints: usize,
+    interactive: bool,
+}
+
+fn interrupted() -> anyhow::Error {
+    anyhow!("interrupted; every process it started has been stopped")
+}
+
+impl Demo<'_> {
+    fn run_one(&self, arm: Arm, seed: u64, index: usize) -> anyhow::Result<RunResult> {
+        let name = format!("{}-s{seed}", arm.name());
+        let topics = TopicsConfig { prefix: self.prefix.clone(), domain: None, mission: name.clone() };
+        let mut recorder = Recorder::open(&topics)?;
+        let scale = self.args.time_scale.to_string();
+        let common = |cmd: &mut Command| {
+            cmd.args(["--prefix", &self.prefix, "--mission-name", &name, "--seed", &seed.to_string()])
+                .args(["--time-scale", &scale])
+                .env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()));
+            if let Some(m) = &self.mission_arg {
+                cmd.arg("--mission").arg(m);
+            }
+        };
+        let mut viewer = match arm {
+            Arm::DeadReckoning => None,
+            Arm::Viewer(algo) => {
+                let mut cmd = Command::new(&self.bins.viewer);
+                common(&mut cmd);
+                cmd.args(["--algo", algo.name(), "--map-id", &(index + 1).to_string()])
+                    .arg("--events")
+                    .arg(self.logs.join(format!("{name}-viewer.jsonl")));
+                Some(Proc::spawn("dyfos-viewer", &mut cmd, &self.logs.join(format!("{name}-viewer.log")))?)
+            }
+        };
+        let mut cmd = Command::new(&self.bins.rover);
+        common(&mut cmd);
+        cmd.args(["--viewer-timeout", "30", "--measurement-timeout", "30"])
+            .arg("--events")
+            .arg(self.logs.join(format!("{name}-rover.jsonl")));
+        if arm == Arm::DeadReckoning {
+            cmd.arg("--dead-reckoning");
+        }
+        let rover_log = self.logs.join(format!("{name}-rover.log"));
+        let mut rover = Proc::spawn("dyfos-rover", &mut cmd, &rover_log)?;
+
+        let mut shown = (u32::MAX, usize::MAX);
+        let ok = loop {
+            if shutdown::requested() {
+                return Err(interrupted());
+            }
+            recorder.poll();
+            let t = recorder.trace();
+            let now = (t.step(), t.updates());
+            if now != shown && self.interactive {
+                shown = now;
+                eprint!(
+                    "\r  {:<15} seed {seed}: waypoint {}/{}, {} measured   ",
+                    arm.name(),
+                    now.0,
+                    self.waypoints,
+                    now.1
+                );
+                let _ = std::io::stderr().flush();
+            }
+            if let Some(ok) = rover.exited() {
+                break ok;
+            }
+            if let Some(v) = viewer.as_mut()
+                && v.exited() == Some(false)
+                && !recorder.trace().finished()
+            {
+                tracing::warn!(
+                    "dyfos-viewer exited early; see {}",
+                    self.logs.join(format!("{name}-viewer.log")).display()
+                );
+            }
+            recorder.wait(Duration::from_millis(100));
+        };
+        if self.interactive {
+            eprint!("\r{:80}\r", "");
+        }
+        if !ok {
+            let log = std::fs::read_to_string(&rover_log).unwrap_or_default();
+            let tail: Vec<&str> = log.lines().rev().take(5).collect();
+            bail!(
+                "dyfos-rover ({name}) failed; its log is {}:\n{}",
+                rover_log.display(),
+                tail.into_iter().rev().collect::<Vec<_>>().join("\n")
+            );
+        }
+        if let Some(v) = viewer.as_mut() {
+            // The viewer leaves when the rover says it finished.
+            let start = Instant::now();
+            while v.running() && v.exited().is_none() && start.elapsed() < Duration::from_secs(10) {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            v.stop(Duration::from_secs(3));
+        }
+        let trace = recorder.finish();
+        let ape = trace.ape().ok_or_else(|| anyhow!("no samples were recorded for {name}"))?;
+        let observed =
+            trace.measurements.iter().filter(|m| matches!(m.observation, Observation::Observed { .. })).count();
+        eprintln!(
+            "  {:<15} seed {seed}: APE RMSE {:5.1} cm, max {:5.1} cm; {}/{} rendezvous measured",
+            arm.name(),
+            ape.rmse * 100.0,
+            ape.max * 100.0,
+            if arm == Arm::DeadReckoning { 0 } else { observed },
+            self.waypoints
+        );
+        Ok(RunResult { arm, seed, trace, ape })
+    }
+}
+
+fn start_daemon(bins: &Binaries, prefix: &str, state: &Path, log: &Path) -> anyhow::Result<Proc> {
+    let mut cmd = Command::new(&bins.dyfosd);
+    cmd.args(["--prefix", prefix]).arg("--state-dir").arg(state);
+    cmd.env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()));
+    let mut daemon = Proc::spawn("dyfosd", &mut cmd, log)?;
+    let config = ClientConfig {
+        prefix: prefix.to_string(),
+        connect_timeout: Duration::from_millis(100),
+        ..ClientConfig::default()
+    };
+    let start = Instant::now();
+    loop {
+        if shutdown::requested() {
+            return Err(interrupted());
+        }
+        if daemon.exited().is_some() {
+            bail!("dyfosd exited at start; see {}", log.display());
+        }
+        if Client::connect(&config).is_ok() {
+            return Ok(daemon);
+        }
+        if start.elapsed() > Duration::from_secs(30) {
+            bail!("dyfosd did not come up within 30 s; see {}", log.display());
+        }
+    }
+}
+
+/// The table of paper Table I: one column per arm, rows RMSE, median, mean, std,
+/// max in cm; with several seeds, mean ± std over seeds.
+fn table(results: &[RunResult], arms: &[Arm]) -> String {
+    let rows = ["RMSE", "Median", "Mean", "Std", "Max"];
+    let mut cells: Vec<Vec<String>> = Vec::new();
+    for arm in arms {
+        let per_seed: Vec<[f64; 5]> = results.iter().filter(|r| r.arm == *arm).map(|r| r.ape.centimetres()).collect();
+        let col = (0..5)
+            .map(|k| {
+                let v: Vec<f64> = per_seed.iter().map(|s| s[k]).collect();
+                let (m, s) = mean_std(&v);
+                if v.len() > 1 { format!("{m:.1} ± {s:.1}") } else { format!("{m:.1}") }
+            })
+            .collect();
+        cells.push(col);
+    }
+    let width =
+        cells.iter().flatten().map(|c| c.chars().count()).chain(arms.iter().map(|a| a.name().len())).max().unwrap_or(8)
+            + 2;
+    let mut out = format!("{:<8}", "APE (cm)");
+    for a in arms {
+        out += &format!("{:>width$}", a.name());
+    }
+    out.push('\n');
+    for (k, row) in rows.iter().enumerate() {
+        out += &format!("{row:<8}");
+        for col in &cells {
+            out += &format!("{:>width$}", col[k]);
+        }
+        out.push('\n');
+    }
+    out
+}
+
+fn summary_json(results: &[RunResult]) -> serde_json::Value {
+    let runs: Vec<serde_json::Value> = results
+        .iter()
+        .map(|r| {
+            serde_json::json!({
+                "arm": r.arm.name(), "seed": r.seed, "ape_m": r.ape,
+                "updates": r.trace.updates(),
+                "rendezvous": r.trace.measurements.len(),
+            })
+        })
+        .collect();
+    serde_json::json!({ "runs": runs })
+}
+
+/// `dyfos demo`. Exit code 130 when interrupted.
+pub fn demo(args: &DemoArgs) -> Result<(), Failure> {
+    run(args).map_err(|f| if shutdown::requested() { Failure { code: 130, error: f.error } } else { f })
+}
+
+fn run(args: &DemoArgs) -> Result<(), Failure> {
+    if !(args.time_scale.is_finite() && args.time_scale >= 0.0) {
+        return Err(Failure::invalid(anyhow!(
+            "--time-scale = {} must be ≥ 0 (0: as fast as possible)",
+            args.time_scale
+        )));
+    }
+    if args.seeds == 0 || args.algos.is_empty() {
+        return Err(Failure::invalid(anyhow!("give at least one seed and one algorithm")));
+    }
+    let mission = Mission::load(args.mission.as_deref()).map_err(Failure::invalid)?;
+    let bins = Binaries::locate()?;
+    shutdown::install();
+    let logs = args.out.join("logs");
+    std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
+    let pid = std::process::id();
+    let prefix = format!("dyfos-demo-{pid}/");
+    let state = std::env::temp_dir().join(format!("dyfos-demo-{pid}"));
+    let _state_guard = RemoveOnDrop(state.clone());
+
+    let mut arms: Vec<Arm> = args.algos.iter().map(|a| Arm::Viewer(*a)).collect();
+    if !args.no_baseline {
+        arms.push(Arm::DeadReckoning);
+    }
+    eprintln!(
+        "dyfos demo: {} mission, {} waypoints over {:.1} m, {} obstacles; {} × {} seed(s); logs in {}",
+        if args.mission.is_some() { "the given" } else { "the built-in" },
+        mission.waypoints.len(),
+        mission.path_length(),
+        mission.world.obstacles().len(),
+        arms.iter().map(|a| a.name()).collect::<Vec<_>>().join(", "),
+        args.seeds,
+        logs.display()
+    );
+    let started = Instant::now();
+    let mut daemon = start_daemon(&bins, &prefix, &state, &logs.join("dyfosd.log"))?;
+    let demo = Demo {
+        args,
+        bins,
+        prefix,
+        logs: logs.clone(),
+        mission_arg: args.mission.as_ref().map(|p| std::path::absolute(p).unwrap_or_else(|_| p.clone())),
+        waypoints: mission.waypoints.len(),
+        interactive: std::io::stderr().is_terminal(),
+    };
+    let mut results = Vec::new();
+    for seed in args.seed..args.seed.saturating_add(args.seeds) {
+        for (i, arm) in arms.iter().enumerate() {
+            results.push(demo.run_one(*arm, seed, i)?);
+        }
+    }
+    if !daemon.stop(Duration::from_secs(10)) {
+        tracing::warn!("dyfosd did not stop cleanly; see {}", logs.join("dyfosd.log").display());
+    }
+
+    let where_ = if args.mission.is_some() { "given mission" } else { "built-in mission (SPEC §10)" };
+    let seeds = if args.seeds == 1 {
+        format!("seed {}", args.seed)
+    } else {
+        format!("seeds {}..={}, mean ± std over seeds", args.seed, args.seed + args.seeds - 1)
+    };
+    println!("\nAbsolute position error of the rover, {where_}, {seeds}:\n");
+    print!("{}", table(&results, &arms));
+    for arm in &arms {
+        if let Some(r) = results.iter().find(|r| r.arm == *arm && r.seed == args.seed) {
+            let title = format!(
+                "{} — seed {}: APE RMSE {:.1} cm, max {:.1} cm",
+                arm.name(),
+                r.seed,
+                r.ape.rmse * 100.0,
+                r.ape.max * 100.0
+            );
+            let svg = render_svg(&mission.world, &mission.waypoints, &r.trace, &title);
+            let path = args.out.join(format!("mission-{}.svg", arm.name()));
+            std::fs::write(&path, svg).with_context(|| format!("cannot write {}", path.display()))?;
+        }
+    }
+    let summary = args.out.join("summary.json");
+    std::fs::write(&summary, serde_json::to_string_pretty(&summary_json(&results))?)
+        .with_context(|| format!("cannot write {}", summary.display()))?;
+    println!(
+        "\nSVGs (paper Fig. 5 style): {}/mission-<algorithm>.svg; summary: {}; took {:.0} s",
+        args.out.display(),
+        summary.display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Removes a directory tree when dropped.
+struct RemoveOnDrop(PathBuf);
+
+impl Drop for RemoveOnDrop {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
