@@ -12,6 +12,8 @@
 //! drop(daemon);
 //! ```
 
+pub mod mission;
+
 use dyfos_client::{Client, ClientConfig};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};

@@ -2,11 +2,11 @@
 //! mission, as they are published.
 
 use super::ApeStats;
-use crate::mission::topics::{Inbox, MAX_BUFFER, TopicOpenError, Topics, TopicsConfig};
+use crate::mission::topics::{Inbox, MAX_BUFFER, Outbox, TopicOpenError, Topics, TopicsConfig};
 use crate::rover::{MISSION, SIM};
 use dyfos_shared::wire::mission::{
-    ESTIMATE_TOPIC, Estimate, EstimateMsg, MEASUREMENT_TOPIC, Measurement, MeasurementMsg, Phase, TRUTH_TOPIC,
-    TrueState, TrueStateMsg,
+    ESTIMATE_TOPIC, EVALUATION_TOPIC, Estimate, EstimateMsg, EvaluationAckMsg, MEASUREMENT_TOPIC, Measurement,
+    MeasurementMsg, Phase, TRUTH_TOPIC, TrueState, TrueStateMsg,
 };
 use std::collections::BTreeMap;
 use std::time::Duration;
@@ -61,12 +61,15 @@ impl MissionTrace {
 }
 
 /// Subscribes to a mission's ground truth, estimates and measurements. Open it
-/// before the rover starts: what was published before is not replayed.
+/// before the rover starts: what was published before is not replayed. Once it
+/// holds the rover's final sample it acknowledges it, which lets the rover exit.
 pub struct Recorder {
     _topics: Topics,
     truth: Inbox<TrueStateMsg>,
     estimate: Inbox<EstimateMsg>,
     measurement: Inbox<MeasurementMsg>,
+    ack: Outbox<EvaluationAckMsg>,
+    acked: bool,
     trace: MissionTrace,
 }
 
@@ -84,6 +87,8 @@ impl Recorder {
             truth: topics.inbox(SIM, TRUTH_TOPIC, MAX_BUFFER)?,
             estimate: topics.inbox(MISSION, ESTIMATE_TOPIC, MAX_BUFFER)?,
             measurement: topics.inbox(MISSION, MEASUREMENT_TOPIC, 256)?,
+            ack: topics.outbox(MISSION, EVALUATION_TOPIC)?,
+            acked: false,
             _topics: topics,
             trace: MissionTrace::default(),
         })
@@ -112,6 +117,15 @@ impl Recorder {
             match Measurement::try_from(&m) {
                 Ok(x) => self.trace.measurements.push(x),
                 Err(_) => self.trace.malformed += 1,
+            }
+        }
+        if !self.acked
+            && let Some(last) = self.trace.estimates.iter().find(|e| e.phase == Phase::Finished)
+            && self.trace.truth.iter().any(|t| t.sample == last.sample)
+        {
+            self.acked = true;
+            if let Err(e) = self.ack.send(EvaluationAckMsg { sample: last.sample }) {
+                tracing::warn!("cannot acknowledge the rover's last sample: {e}");
             }
         }
         n

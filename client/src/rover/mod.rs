@@ -39,8 +39,9 @@ use crate::sim::{SimClock, TrueRover, standard_normal, stream_seed, streams};
 use controller::{DriveConfig, plan_leg};
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::wire::mission::{
-    ESTIMATE_TOPIC, Estimate, EstimateMsg, MEASUREMENT_TOPIC, Measurement, MeasurementMsg, Observation, Phase,
-    RENDEZVOUS_TOPIC, RendezvousState, RendezvousStateMsg, TRUTH_TOPIC, TrueState, TrueStateMsg,
+    ESTIMATE_TOPIC, EVALUATION_TOPIC, Estimate, EstimateMsg, EvaluationAckMsg, MEASUREMENT_TOPIC, Measurement,
+    MeasurementMsg, Observation, Phase, RENDEZVOUS_TOPIC, RendezvousState, RendezvousStateMsg, TRUTH_TOPIC, TrueState,
+    TrueStateMsg,
 };
 use ekf::Ekf;
 use rand::SeedableRng;
@@ -72,6 +73,9 @@ pub struct RoverConfig {
     pub sample_every: u32,
     /// JSON-lines event log.
     pub events: Option<PathBuf>,
+    /// At the goal, how long to wait for the evaluation (estimate readers, if any)
+    /// to acknowledge the last sample before exiting, wall time.
+    pub linger: Duration,
 }
 
 impl RoverConfig {
@@ -89,6 +93,7 @@ impl RoverConfig {
             drive: DriveConfig::default(),
             sample_every: 5,
             events: None,
+            linger: Duration::from_secs(5),
         }
     }
 }
@@ -143,6 +148,7 @@ struct Ports {
     measurement: Inbox<MeasurementMsg>,
     estimate: Outbox<EstimateMsg>,
     truth: Outbox<TrueStateMsg>,
+    ack: Inbox<EvaluationAckMsg>,
 }
 
 /// The running state.
@@ -180,18 +186,23 @@ impl Run<'_> {
         let start = Instant::now();
         let timeout = self.config.measurement_timeout;
         loop {
-            self.ports.topics.cleanup_dead_nodes();
-            if self.ports.measurement.writers() == 0 && self.ports.rendezvous.readers() == 0 {
-                return Err(Missed::ViewerGone);
-            }
             let left = timeout.saturating_sub(start.elapsed());
-            if left.is_zero() || stop() {
-                return Err(Missed::Timeout);
+            // Take what arrives within 200 ms; only then ask whether the viewer lives,
+            // so that a measurement sent just before it died is still used.
+            let mut msg = self.ports.measurement.recv_timeout(left.min(Duration::from_millis(200)), stop);
+            if msg.is_none() {
+                if stop() || start.elapsed() >= timeout {
+                    return Err(Missed::Timeout);
+                }
+                self.ports.topics.cleanup_dead_nodes();
+                if self.ports.measurement.writers() == 0 && self.ports.rendezvous.readers() == 0 {
+                    msg = self.ports.measurement.try_recv();
+                    if msg.is_none() {
+                        return Err(Missed::ViewerGone);
+                    }
+                }
             }
-            // Re-check for a dead viewer every 200 ms while waiting.
-            let Some(msg) = self.ports.measurement.recv_timeout(left.min(Duration::from_millis(200)), stop) else {
-                continue;
-            };
+            let Some(msg) = msg else { continue };
             match Measurement::try_from(&msg) {
                 Ok(m) if m.step == step => return Ok(m),
                 Ok(m) => self.log.record("measurement_stale", self.sim_time, json!({"step": step, "for_step": m.step})),
@@ -229,6 +240,7 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
         measurement: topics.inbox(MISSION, MEASUREMENT_TOPIC, 64)?,
         estimate: topics.outbox(MISSION, ESTIMATE_TOPIC)?,
         truth: topics.outbox(SIM, TRUTH_TOPIC)?,
+        ack: topics.inbox(MISSION, EVALUATION_TOPIC, 16)?,
         topics,
     };
     let log = EventLog::create(config.events.as_deref(), "rover")?;
@@ -358,6 +370,7 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
             .rendezvous
             .send(RendezvousStateMsg::from(&RendezvousState::Finished { step: steps, sim_time: run.sim_time }))?;
     }
+    linger(&run, config.linger, stop);
     run.log.record(
         "finished",
         run.sim_time,
@@ -365,6 +378,25 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
     );
     tracing::info!(steps, measured, missed, "rover reached the goal");
     Ok(RoverReport { steps, measured, missed, final_belief: run.ekf.belief() })
+}
+
+/// Waits up to `limit` for every evaluation listening to the estimates (each one
+/// acknowledges once) to confirm it holds the last sample: a reader that had not
+/// yet connected when the rover's ports closed would lose the samples.
+fn linger(run: &Run, limit: Duration, stop: &impl Fn() -> bool) {
+    let last = run.sample.saturating_sub(1);
+    let start = Instant::now();
+    let mut acks = 0;
+    while run.ports.estimate.readers() > acks {
+        let left = limit.saturating_sub(start.elapsed());
+        if left.is_zero() || stop() {
+            tracing::warn!("an evaluation did not acknowledge the last sample within {limit:?}");
+            return;
+        }
+        if run.ports.ack.recv_timeout(left, stop).is_some_and(|a| a.sample >= last) {
+            acks += 1;
+        }
+    }
 }
 
 /// Topic group of the robots' own topics.

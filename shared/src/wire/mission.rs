@@ -9,6 +9,12 @@
 //! | `mission/<name>/measurement` | viewer → rover (and evaluation) | [`MeasurementMsg`]: the measured position and R, or why there is none |
 //! | `mission/<name>/estimate` | rover → evaluation | [`EstimateMsg`]: the rover's EKF belief over time |
 //! | `sim/<name>/truth` | simulator → simulated camera and evaluation only | [`TrueStateMsg`]: the rover's true pose |
+//! | `mission/<name>/evaluation` | evaluation → rover | [`EvaluationAckMsg`]: "I have every sample up to this one" |
+//!
+//! A publisher's samples reach a subscriber only if the subscriber connected while
+//! the publisher was alive; a rover that finishes in milliseconds could exit before
+//! a busy evaluation ever connected. So a rover with estimate readers waits (a
+//! bounded time) at the end for their acknowledgement of its last sample.
 //!
 //! Payloads are `#[repr(C)]`, plain numbers only, with a stable `#[type_name]` so
 //! that other languages can join. Tags and codes are integers and every message is
@@ -45,6 +51,18 @@ pub const MEASUREMENT_TOPIC: &str = "measurement";
 pub const ESTIMATE_TOPIC: &str = "estimate";
 /// Topic of [`TrueStateMsg`] (group `sim`): simulation only.
 pub const TRUTH_TOPIC: &str = "truth";
+/// Topic of [`EvaluationAckMsg`] (group `mission`).
+pub const EVALUATION_TOPIC: &str = "evaluation";
+
+/// The evaluation's acknowledgement: it holds every truth and estimate sample up
+/// to and including `sample`. Any value is acceptable, so there is nothing to decode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[type_name("dyfos::mission::EvaluationAck")]
+#[repr(C)]
+pub struct EvaluationAckMsg {
+    /// The last sample number received.
+    pub sample: u64,
+}
 
 /// A message that cannot be used, and why.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -1,0 +1,200 @@
+//! Helpers for the mission tests: a small world, and `dyfos-rover` /
+//! `dyfos-viewer` processes in a [`Sandbox`], killed when dropped.
+//!
+//! ```no_run
+//! use dyfos_tests::Sandbox;
+//! use dyfos_tests::mission::{MissionFiles, small_mission};
+//!
+//! let sandbox = Sandbox::new("doc-mission");
+//! let _daemon = sandbox.start_daemon(&[]);
+//! let files = MissionFiles::new(&sandbox, &small_mission());
+//! let mut viewer = files.viewer("m", "dyfos", 1, &[]);
+//! let mut rover = files.rover("m", 1, "0", &[]);
+//! assert!(rover.wait_exit().success());
+//! assert!(viewer.wait_exit().success());
+//! ```
+
+use crate::{Sandbox, bin, wait_for};
+use dyfos_client::eval::Recorder;
+use dyfos_client::mission::Mission;
+use dyfos_client::mission::log::read_events;
+use dyfos_client::mission::topics::TopicsConfig;
+use dyfos_client::sim::OdometryNoise;
+use dyfos_shared::math::Point2;
+use dyfos_shared::params::Params;
+use dyfos_shared::posterior::Belief;
+use dyfos_shared::world::{Bounds, Obstacle, Sun, VerticalCylinder, World};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+
+/// A 16 m × 16 m world with 6 trees and 4 waypoints over 10 m. The odometry is
+/// noisier than the built-in mission's, so that a rover left to dead reckoning
+/// drifts by decimetres to metres within these few legs.
+pub fn small_mission() -> Mission {
+    let trees = [[-0.5, 1.0], [-3.0, 0.5], [1.5, -3.5], [3.5, 3.0], [-1.0, -4.0], [5.0, -1.5]];
+    let world = World::new(
+        0,
+        Bounds::new([-8.0, -8.0, 8.0, 8.0]).expect("bounds"),
+        Sun::new(0.6, 2.4).expect("sun"),
+        trees.iter().enumerate().map(|(i, c)| {
+            let tree = VerticalCylinder { center: Point2::new(c[0], c[1]), radius: 0.5, height: 10.0 };
+            (i as u32 + 1, Obstacle::Cylinder(tree))
+        }),
+        None,
+    )
+    .expect("world");
+    let heading = 1.5f64.atan2(2.0);
+    Mission {
+        world,
+        params: Params::default(),
+        initial_belief: Belief::new(
+            [-4.0, -3.0, heading],
+            [[0.0025, 0.0, 0.0], [0.0, 0.0025, 0.0], [0.0, 0.0, 0.0025]],
+        )
+        .expect("belief"),
+        waypoints: vec![[-2.0, -1.5], [0.5, -1.5], [2.0, 0.5], [4.5, 1.0]],
+        true_start: None,
+        viewer_start: ([-4.0, -3.0, 3.0], heading),
+        odometry: OdometryNoise { trans_per_m: 0.005, trans_per_rad: 0.0005, rot_per_m: 0.005, rot_per_rad: 0.01 },
+        sun_azimuth_rate: 0.0,
+    }
+}
+
+/// A mission file for one test, beside the sandbox's state directory, removed on drop.
+#[derive(Debug)]
+pub struct MissionFiles<'a> {
+    sandbox: &'a Sandbox,
+    /// The mission file.
+    pub mission: PathBuf,
+    dir: PathBuf,
+}
+
+impl<'a> MissionFiles<'a> {
+    /// Writes `mission` for the processes of `sandbox`.
+    pub fn new(sandbox: &'a Sandbox, mission: &Mission) -> Self {
+        let dir = sandbox.state_dir.with_extension("mission");
+        std::fs::create_dir_all(&dir).expect("mission dir");
+        let path = dir.join("mission.json");
+        std::fs::write(&path, mission.to_json()).expect("write mission");
+        MissionFiles { sandbox, mission: path, dir }
+    }
+
+    fn command(&self, binary: &str, name: &str, seed: u64, time_scale: &str) -> Command {
+        let mut cmd = Command::new(bin(binary));
+        cmd.args(["--prefix", &self.sandbox.prefix, "--domain", &self.sandbox.domain, "--mission-name", name])
+            .arg("--mission")
+            .arg(&self.mission)
+            .args(["--seed", &seed.to_string(), "--time-scale", time_scale])
+            .env("RUST_LOG", "debug")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null());
+        cmd
+    }
+
+    fn spawn(&self, mut cmd: Command, what: &str) -> Robot {
+        let log = self.dir.join(format!("{what}.log"));
+        let events = self.dir.join(format!("{what}.jsonl"));
+        cmd.arg("--events").arg(&events);
+        cmd.stderr(std::fs::File::create(&log).expect("log file"));
+        let child = cmd.spawn().unwrap_or_else(|e| panic!("start {what}: {e}"));
+        Robot { child: Some(child), log, events }
+    }
+
+    /// Starts `dyfos-viewer` for mission `name` with `algo`, unpaced, map id 1.
+    pub fn viewer(&self, name: &str, algo: &str, seed: u64, extra: &[&str]) -> Robot {
+        let mut cmd = self.command("dyfos-viewer", name, seed, "0");
+        cmd.args(["--algo", algo, "--connect-timeout", "30", "--observe-timeout", "30"]).args(extra);
+        self.spawn(cmd, &format!("{name}-viewer"))
+    }
+
+    /// Starts `dyfos-rover` for mission `name`, at `time_scale` (0: unpaced).
+    pub fn rover(&self, name: &str, seed: u64, time_scale: &str, extra: &[&str]) -> Robot {
+        let mut cmd = self.command("dyfos-rover", name, seed, time_scale);
+        cmd.args(["--viewer-timeout", "30"]).args(extra);
+        self.spawn(cmd, &format!("{name}-rover"))
+    }
+
+    /// A recorder for mission `name`: open it before starting the rover.
+    pub fn recorder(&self, name: &str) -> Recorder {
+        Recorder::open(&TopicsConfig {
+            prefix: self.sandbox.prefix.clone(),
+            domain: Some(self.sandbox.domain.clone()),
+            mission: name.to_string(),
+        })
+        .expect("open the recorder")
+    }
+}
+
+impl Drop for MissionFiles<'_> {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// A rover or viewer process, killed when dropped.
+#[derive(Debug)]
+pub struct Robot {
+    child: Option<Child>,
+    log: PathBuf,
+    events: PathBuf,
+}
+
+impl Robot {
+    /// The process id.
+    pub fn pid(&self) -> u32 {
+        self.child.as_ref().map_or(0, Child::id)
+    }
+
+    /// Waits (at most [`crate::PATIENCE`]) for the exit.
+    pub fn wait_exit(&mut self) -> ExitStatus {
+        let child = self.child.as_mut().expect("still running");
+        let status = wait_for("a mission process to exit", || child.try_wait().expect("try_wait"));
+        self.child = None;
+        status
+    }
+
+    /// `Some(status)` if it has exited.
+    pub fn try_exit(&mut self) -> Option<ExitStatus> {
+        let status = self.child.as_mut()?.try_wait().expect("try_wait")?;
+        self.child = None;
+        Some(status)
+    }
+
+    /// SIGKILL, and reap.
+    pub fn kill9(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+
+    /// Its log (stderr) so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Its JSON-lines events so far.
+    pub fn events(&self) -> Vec<serde_json::Value> {
+        read_events(&self.events).unwrap_or_default()
+    }
+
+    /// The event log's path.
+    pub fn events_path(&self) -> &Path {
+        &self.events
+    }
+}
+
+impl Drop for Robot {
+    fn drop(&mut self) {
+        self.kill9();
+    }
+}
+
+/// The events named `event`, as (step, event) pairs in log order.
+pub fn steps_of<'e>(events: &'e [serde_json::Value], event: &str) -> Vec<(u64, &'e serde_json::Value)> {
+    events
+        .iter()
+        .filter(|e| e["event"] == event)
+        .map(|e| (e["step"].as_u64().unwrap_or_else(|| panic!("{event} without a step: {e}")), e))
+        .collect()
+}

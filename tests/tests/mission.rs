@@ -1,0 +1,227 @@
+//! The rover and viewer processes against a real `dyfosd` (SPEC §9, paper Fig. 2):
+//! the mission reaches its goal, every step's messages happen in order and carry
+//! what the other side sent, measurements beat dead reckoning, and a viewer killed
+//! mid-run leaves the rover finishing on dead reckoning.
+
+use dyfos_client::eval::{MissionTrace, Recorder};
+use dyfos_shared::wire::mission::Observation;
+use dyfos_tests::mission::{MissionFiles, Robot, small_mission, steps_of};
+use dyfos_tests::{PATIENCE, Sandbox, bin};
+use std::process::{Command, ExitStatus};
+use std::time::{Duration, Instant};
+
+/// Records the mission until the rover exits; returns its status and the trace.
+fn record_until_exit(mut recorder: Recorder, rover: &mut Robot) -> (ExitStatus, MissionTrace) {
+    let start = Instant::now();
+    loop {
+        recorder.poll();
+        if let Some(status) = rover.try_exit() {
+            return (status, recorder.finish());
+        }
+        assert!(start.elapsed() < PATIENCE, "the rover did not finish:\n{}", rover.log());
+        recorder.wait(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn rover_reaches_the_goal_and_every_exchange_happens_in_order() {
+    let sandbox = Sandbox::new("mission-order");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mission = small_mission();
+    let files = MissionFiles::new(&sandbox, &mission);
+    let recorder = files.recorder("m");
+    let mut viewer = files.viewer("m", "dyfos", 7, &[]);
+    let mut rover = files.rover("m", 7, "0", &[]);
+    let (status, trace) = record_until_exit(recorder, &mut rover);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    assert!(trace.finished(), "the goal was never reported");
+    let n = mission.waypoints.len() as u64;
+
+    // The rover: per step, send the rendezvous belief, arrive, update; then finish.
+    let rover_events = rover.events();
+    let kinds = ["start", "rendezvous_sent", "arrived", "updated", "dead_reckoning", "finished"];
+    let seq: Vec<(String, u64)> = rover_events
+        .iter()
+        .filter(|e| kinds.iter().any(|k| e["event"] == *k))
+        .map(|e| (e["event"].as_str().unwrap().to_string(), e["step"].as_u64().unwrap_or(0)))
+        .collect();
+    let mut expected = vec![("start".to_string(), 0)];
+    for k in 1..=n {
+        for e in ["rendezvous_sent", "arrived", "updated"] {
+            expected.push((e.to_string(), k));
+        }
+    }
+    expected.push(("finished".to_string(), 0));
+    assert_eq!(seq, expected, "rover log:\n{}", rover.log());
+
+    // The viewer: per step, receive, get an answer, fly there, send; then finish.
+    let viewer_events = viewer.events();
+    let kinds = ["rendezvous_received", "answer", "arrived", "measurement_sent", "no_answer", "finished"];
+    let seq: Vec<(String, u64)> = viewer_events
+        .iter()
+        .filter(|e| kinds.iter().any(|k| e["event"] == *k))
+        .map(|e| (e["event"].as_str().unwrap().to_string(), e["step"].as_u64().unwrap()))
+        .collect();
+    let mut expected = Vec::new();
+    for k in 1..=n {
+        for e in ["rendezvous_received", "answer", "arrived", "measurement_sent"] {
+            expected.push((e.to_string(), k));
+        }
+    }
+    expected.push(("finished".to_string(), n));
+    assert_eq!(seq, expected, "viewer log:\n{}", viewer.log());
+    assert_eq!(viewer_events[0]["event"], "map_synced", "the viewer uploads its map first");
+
+    // Each side received exactly what the other sent.
+    let sent = steps_of(&rover_events, "rendezvous_sent");
+    let received = steps_of(&viewer_events, "rendezvous_received");
+    for ((ks, s), (kr, r)) in sent.iter().zip(&received) {
+        assert_eq!(ks, kr);
+        assert_eq!(s["mean"], r["mean"], "step {ks}: the viewer got another belief than the rover sent");
+    }
+    assert_eq!(trace.measurements.len() as u64, n, "one measurement per rendezvous");
+    for ((k, update), m) in steps_of(&rover_events, "updated").iter().zip(&trace.measurements) {
+        assert_eq!(*k, u64::from(m.step));
+        let Observation::Observed { position, r } = m.observation else { panic!("step {k} not observed: {m:?}") };
+        assert_eq!(update["z"], serde_json::json!(position), "step {k}: the rover used another measurement");
+        assert_eq!(update["R"], serde_json::json!(r.to_rows()));
+        assert!(m.viewer.is_some() && m.predicted_cost.is_some());
+    }
+    // The rover's last estimate is where its log says it finished.
+    let last = trace.estimates.last().unwrap();
+    assert_eq!(rover_events.last().unwrap()["belief"], serde_json::json!(last.belief.mean.as_slice()));
+}
+
+#[test]
+fn measurements_beat_dead_reckoning_on_every_seed() {
+    let sandbox = Sandbox::new("mission-ape");
+    let _daemon = sandbox.start_daemon(&[]);
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let mut with = Vec::new();
+    let mut without = Vec::new();
+    for seed in 1..=3 {
+        let name = format!("dyfos-{seed}");
+        let recorder = files.recorder(&name);
+        let mut viewer = files.viewer(&name, "dyfos", seed, &[]);
+        let mut rover = files.rover(&name, seed, "0", &[]);
+        let (status, trace) = record_until_exit(recorder, &mut rover);
+        assert!(status.success(), "rover failed:\n{}", rover.log());
+        assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+        assert!(trace.updates() >= 3, "seed {seed}: only {} updates", trace.updates());
+        with.push(trace.ape().unwrap().rmse);
+
+        let name = format!("dead-{seed}");
+        let recorder = files.recorder(&name);
+        let mut rover = files.rover(&name, seed, "0", &["--dead-reckoning"]);
+        let (status, trace) = record_until_exit(recorder, &mut rover);
+        assert!(status.success(), "rover failed:\n{}", rover.log());
+        assert!(
+            trace.finished() && trace.updates() == 0,
+            "{} estimates, {} truth, finished {}, {} updates; last {:?}",
+            trace.estimates.len(),
+            trace.truth.len(),
+            trace.finished(),
+            trace.updates(),
+            trace.estimates.last()
+        );
+        without.push(trace.ape().unwrap().rmse);
+    }
+    for (seed, (w, wo)) in with.iter().zip(&without).enumerate() {
+        assert!(w < wo, "seed {}: APE RMSE {w} m with dyfos, {wo} m dead reckoning", seed + 1);
+    }
+    let (w, wo) = (with.iter().sum::<f64>() / 3.0, without.iter().sum::<f64>() / 3.0);
+    assert!(w < wo / 2.0, "mean APE RMSE {w} m with dyfos vs {wo} m dead reckoning");
+}
+
+#[test]
+fn a_killed_viewer_leaves_the_rover_finishing_on_dead_reckoning() {
+    let sandbox = Sandbox::new("mission-kill");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mission = small_mission();
+    let files = MissionFiles::new(&sandbox, &mission);
+    let mut recorder = files.recorder("m");
+    let mut viewer = files.viewer("m", "dyfos", 3, &[]);
+    // Paced at 10× so that the mission is still under way when the viewer dies; a
+    // long measurement timeout, so that finishing in time needs the rover to notice
+    // the dead viewer rather than wait it out.
+    let mut rover = files.rover("m", 3, "10", &["--measurement-timeout", "60"]);
+    // Kill the viewer once the rover has used its first measurement.
+    let start = Instant::now();
+    while recorder.trace().updates() == 0 {
+        assert!(start.elapsed() < PATIENCE, "no first update:\n{}", viewer.log());
+        assert!(rover.try_exit().is_none(), "the rover ended early:\n{}", rover.log());
+        recorder.wait(Duration::from_millis(20));
+        recorder.poll();
+    }
+    viewer.kill9();
+    let (status, trace) = record_until_exit(recorder, &mut rover);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(trace.finished());
+
+    let events = rover.events();
+    let n = mission.waypoints.len() as u64;
+    let updated: Vec<u64> = steps_of(&events, "updated").iter().map(|(k, _)| *k).collect();
+    let dead: Vec<(u64, String)> = steps_of(&events, "dead_reckoning")
+        .iter()
+        .map(|(k, e)| (*k, e["reason"].as_str().unwrap_or_default().to_string()))
+        .collect();
+    assert_eq!(updated.first(), Some(&1), "step 1 was measured before the kill");
+    assert_eq!(updated.len() + dead.len(), n as usize, "each step is updated or dead-reckoned: {events:?}");
+    let (last, reason) = dead.last().expect("the steps after the kill dead-reckon");
+    assert_eq!(*last, n);
+    assert_eq!(reason, "viewer gone", "the rover noticed the dead viewer");
+    assert!(rover.log().contains("dead-reckoning"), "the log says so:\n{}", rover.log());
+}
+
+#[test]
+fn bad_mission_files_are_refused_with_the_field_named() {
+    let sandbox = Sandbox::new("mission-bad");
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let text = std::fs::read_to_string(&files.mission).unwrap().replacen("\"waypoints\"", "\"waypoint\"", 1);
+    let bad = files.mission.with_file_name("bad.json");
+    std::fs::write(&bad, text).unwrap();
+    for binary in ["dyfos-rover", "dyfos-viewer"] {
+        let out = Command::new(bin(binary)).arg("--mission").arg(&bad).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{binary}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("unknown field `waypoint`"), "{binary}: {err}");
+    }
+}
+
+#[test]
+fn demo_prints_the_ape_table_and_draws_each_run() {
+    let sandbox = Sandbox::new("mission-demo");
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let out_dir = sandbox.state_dir.with_extension("demo");
+    let out = Command::new(bin("dyfos"))
+        .args(["demo", "--time-scale", "0", "--algos", "dyfos,center"])
+        .arg("--mission")
+        .arg(&files.mission)
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let header = stdout.lines().find(|l| l.starts_with("APE (cm)")).expect("a table header");
+    assert_eq!(header.split_whitespace().skip(2).collect::<Vec<_>>(), ["dyfos", "center", "dead-reckoning"]);
+    let rmse: Vec<f64> = stdout
+        .lines()
+        .find(|l| l.starts_with("RMSE"))
+        .expect("an RMSE row")
+        .split_whitespace()
+        .skip(1)
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(rmse.len(), 3);
+    assert!(rmse[0] < rmse[2], "dyfos {} cm vs dead reckoning {} cm", rmse[0], rmse[2]);
+    for arm in ["dyfos", "center", "dead-reckoning"] {
+        let svg = std::fs::read_to_string(out_dir.join(format!("mission-{arm}.svg"))).unwrap();
+        assert!(svg.starts_with("<svg") && svg.contains("<polyline"), "{arm}");
+    }
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["runs"].as_array().unwrap().len(), 3);
+    let _ = std::fs::remove_dir_all(&out_dir);
+}
