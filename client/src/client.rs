@@ -198,7 +198,9 @@ impl Connection {
                 return Err(CallError::Timeout(timeout));
             }
             if elapsed < spin {
-                std::hint::spin_loop();
+                // Yield rather than burn the core: on a busy machine the daemon may
+                // need this very core to answer.
+                std::thread::yield_now();
                 continue;
             }
             if !is_connected() {

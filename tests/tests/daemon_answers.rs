@@ -136,11 +136,11 @@ fn several_client_processes_at_once_and_the_examples() {
             ChildGuard(child)
         })
         .collect();
-    let examples: Vec<(&str, ChildGuard)> = ["rendezvous_once", "map_delta"]
+    let examples: Vec<(&str, ChildGuard)> = ["rendezvous_once", "map_delta", "check_latency"]
         .into_iter()
         .map(|name| {
             let child = Command::new(bin(&format!("examples/{name}")))
-                .args([&sandbox.prefix, &sandbox.domain])
+                .args([&sandbox.prefix, &sandbox.domain, "50"])
                 .stdout(Stdio::piped())
                 .stderr(Stdio::piped())
                 .spawn()
@@ -163,6 +163,11 @@ fn several_client_processes_at_once_and_the_examples() {
         assert!(out.status.success(), "{name}: {}{stdout}", String::from_utf8_lossy(&out.stderr));
         match name {
             "rendezvous_once" => assert!(stdout.starts_with("viewer at ("), "{stdout}"),
+            "check_latency" => {
+                let json: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON line");
+                assert_eq!(json["count"], 50);
+                assert!(json["p50_us"].as_f64().is_some_and(|p| p > 0.0), "{stdout}");
+            }
             _ => {
                 assert!(stdout.contains("rejected as expected: ") && stdout.contains("still at version 3"), "{stdout}")
             }

@@ -10,7 +10,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use dyfos_service::daemon::{Daemon, DaemonConfig, WaitOutcome};
+use dyfos_service::daemon::{Daemon, DaemonConfig, HOUSEKEEPING, WaitOutcome};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -109,10 +109,12 @@ fn serve(mut daemon: Daemon) {
             if daemon.termination_requested() {
                 break;
             }
-            std::hint::spin_loop();
+            // Yield rather than burn the core: a worker or a client may need it.
+            std::thread::yield_now();
             continue;
         }
-        match daemon.wait(Duration::from_secs(1)) {
+        // Signals end the wait at once; the timeout only paces housekeeping.
+        match daemon.wait(HOUSEKEEPING) {
             WaitOutcome::Terminate => break,
             WaitOutcome::Work => last_work = Instant::now(),
             WaitOutcome::Idle => {}

@@ -57,6 +57,9 @@ type RendezvousServer = Server<Ipc, [WireDelta], RendezvousRequestHeader, Rendez
 type MapServer = Server<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapReplyHeader>;
 type StatsServer = Server<Ipc, StatsRequest, (), StatsReply, ()>;
 
+/// How often the daemon expires idle uploads and cleans up after dead clients.
+pub const HOUSEKEEPING: Duration = Duration::from_secs(5);
+
 /// How the daemon runs. [`DaemonConfig::default`] is what `dyfosd` uses without flags.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct DaemonConfig {
@@ -407,7 +410,7 @@ impl Daemon {
                 break;
             }
         }
-        if self.last_housekeeping.elapsed() >= Duration::from_secs(1) {
+        if self.last_housekeeping.elapsed() >= HOUSEKEEPING {
             self.housekeeping();
         }
         handled

@@ -14,7 +14,7 @@ use iceoryx2::active_request::ActiveRequest;
 use std::collections::VecDeque;
 use std::sync::{Arc, MutexGuard};
 use std::time::Instant;
-use tracing::{debug, trace};
+use tracing::{debug, error, trace};
 
 type RendezvousActive = ActiveRequest<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
 
@@ -115,7 +115,11 @@ pub(crate) fn worker(shared: &Shared) {
                 q = shared.work.wait(q).unwrap_or_else(|poisoned| poisoned.into_inner());
             }
         };
-        run(shared, job);
+        // A bug in a search must not take the worker (and the shutdown's count of
+        // queries in flight) with it; the client sees its request dropped.
+        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(shared, job))).is_err() {
+            error!("a search panicked; its query was dropped");
+        }
         lock(&shared.queue).finish(heavy);
         // A heavy job may have become runnable.
         shared.work.notify_all();

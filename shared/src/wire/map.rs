@@ -558,7 +558,23 @@ pub fn world_from_content(
     sun: Sun,
     deltas: &[MapDelta],
 ) -> Result<World, crate::world::MapDeltaError> {
-    let built = World::empty(bounds, sun).apply(deltas)?;
+    // Merge consecutive voxel runs of one grid: applying them one by one would
+    // rebuild the grid once per chunk.
+    let mut merged: Vec<MapDelta> = Vec::with_capacity(deltas.len());
+    for d in deltas {
+        if let (
+            Some(MapDelta::SetVoxels { resolution: r0, origin: o0, cells: c0, occupied: true }),
+            MapDelta::SetVoxels { resolution, origin, cells, occupied: true },
+        ) = (merged.last_mut(), d)
+            && r0.to_bits() == resolution.to_bits()
+            && o0 == origin
+        {
+            c0.extend_from_slice(cells);
+            continue;
+        }
+        merged.push(d.clone());
+    }
+    let built = World::empty(bounds, sun).apply(&merged)?;
     let rebuilt =
         World::new(version, bounds, sun, built.obstacles().iter().map(|(i, o)| (*i, *o)), built.voxels().cloned());
     // `apply` validated every obstacle already; `new` cannot fail on its output.
