@@ -144,3 +144,31 @@ fn main() -> ExitCode {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cli(args: &[&str]) -> Cli {
+        Cli::try_parse_from(std::iter::once("dyfosd").chain(args.iter().copied())).unwrap()
+    }
+
+    #[test]
+    fn flags_override_the_file_which_overrides_defaults() {
+        let dir = std::env::temp_dir().join(format!("dyfosd-config-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("dyfosd.toml");
+        std::fs::write(&file, "prefix = \"from-file/\"\nworkers = 3\nspin_us = 50\nupload_idle_timeout_s = 9\n")
+            .unwrap();
+        let c = config(&cli(&["--config", file.to_str().unwrap(), "--workers", "5"])).unwrap();
+        assert_eq!(c.prefix, "from-file/");
+        assert_eq!(c.workers, 5);
+        assert_eq!(c.spin, Duration::from_micros(50));
+        assert_eq!(c.upload_idle_timeout, Duration::from_secs(9));
+        assert_eq!(c.max_clients, DaemonConfig::default().max_clients);
+        std::fs::write(&file, "prefx = \"typo/\"\n").unwrap();
+        let err = format!("{:#}", config(&cli(&["--config", file.to_str().unwrap()])).unwrap_err());
+        assert!(err.contains("unknown field `prefx`"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -24,7 +24,6 @@
 //! let header = request.header(1, [0, 0]);
 //! assert_eq!(MapRequest::decode(&header, &request.records()).unwrap(), request);
 //! ```
-#![allow(unsafe_code)] // SAFETY: only `#[derive(ZeroCopySend)]` below, on `#[repr(C)]` structs of plain numbers.
 
 use super::{ANY_VERSION, Detail, Rejection, Status};
 use crate::limits::{MAX_DELTAS_PER_MESSAGE, MAX_UPLOAD_CHUNKS};

@@ -27,7 +27,6 @@
 //! assert!(Status::try_from(999).is_err());
 //! assert!(ServiceNames::new("bad prefix/").is_err());
 //! ```
-#![allow(unsafe_code)] // SAFETY: only `#[derive(ZeroCopySend)]` in this module tree, on `#[repr(C)]` structs of plain numbers.
 
 pub mod map;
 pub mod mission;

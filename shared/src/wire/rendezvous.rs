@@ -24,7 +24,6 @@
 //! bad.cov[0][0] = f64::NAN;
 //! assert_eq!(RendezvousRequest::decode(&bad, &[]).unwrap_err().status.name(), "invalid_belief");
 //! ```
-#![allow(unsafe_code)] // SAFETY: only `#[derive(ZeroCopySend)]` below, on `#[repr(C)]` structs of plain numbers.
 
 use super::map::{MapId, WireDelta, decode_deltas, encode_deltas};
 use super::{ANY_VERSION, Detail, Rejection, Status};

@@ -12,7 +12,6 @@
 //! assert_eq!(stats.errors, vec![(Status::UnknownMap, 2)]);
 //! assert_eq!(stats.queries_served, 5);
 //! ```
-#![allow(unsafe_code)] // SAFETY: only `#[derive(ZeroCopySend)]` below, on `#[repr(C)]` structs of plain numbers.
 
 use super::Status;
 use iceoryx2::prelude::ZeroCopySend;
