@@ -296,6 +296,12 @@ impl Client {
         mode: Mode,
         timeout: Duration,
     ) -> Result<RendezvousReply, CallError> {
+        if request.budget == Some(0) {
+            return Err(CallError::Local(Rejection::new(
+                Status::MalformedRequest,
+                "a budget of 0 evaluations can find nothing; use None for the algorithm's own limits",
+            )));
+        }
         let records = request.records();
         if records.len() > MAX_INLINE_DELTAS {
             return Err(CallError::Local(Rejection::new(

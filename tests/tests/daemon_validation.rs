@@ -205,6 +205,10 @@ fn the_client_refuses_what_it_cannot_send() {
     let deltas = vec![MapDelta::Clear; MAX_DELTAS_PER_MESSAGE + 1];
     let err = client.apply(1, None, &deltas, PATIENCE).unwrap_err();
     assert_eq!(err.status(), Some(Status::OverCapacity), "{err}");
+    let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
+    let zero_budget = RendezvousRequest { budget: Some(0), ..RendezvousRequest::new(1, belief) };
+    let err = client.rendezvous(&zero_budget, PATIENCE).unwrap_err();
+    assert!(matches!(err, RendezvousError::Invalid(_)), "{err}");
     let err = client.create_map(1, bounds, Sun::new(0.7, 2.1).unwrap(), PATIENCE).unwrap_err();
     assert_eq!(err.status(), Some(Status::MapExists));
     assert!(!err.is_retryable());

@@ -204,7 +204,8 @@ pub struct RendezvousRequest {
     pub algorithm: Algorithm,
     /// Seed: the same request and seed give the same answer, bit for bit.
     pub seed: u64,
-    /// Most candidates to evaluate; `None` for the algorithm's own limits.
+    /// Most candidates to evaluate; `None` for the algorithm's own limits. On the
+    /// wire 0 means `None`, so `Some(0)` cannot be sent (the client refuses it).
     pub budget: Option<u64>,
     /// Time allowed from receipt to answer; when it passes the daemon answers with
     /// the best feasible pose so far (`stop = deadline`) or `deadline_exceeded`.
