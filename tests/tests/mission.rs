@@ -4,6 +4,7 @@
 //! mid-run leaves the rover finishing on dead reckoning.
 
 use dyfos_client::eval::{MissionTrace, Recorder};
+use dyfos_client::mission::Mission;
 use dyfos_shared::wire::mission::Observation;
 use dyfos_tests::mission::{MissionFiles, Robot, small_mission, steps_of};
 use dyfos_tests::{PATIENCE, Sandbox, bin};
@@ -224,4 +225,38 @@ fn demo_prints_the_ape_table_and_draws_each_run() {
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["runs"].as_array().unwrap().len(), 3);
     let _ = std::fs::remove_dir_all(&out_dir);
+}
+
+#[test]
+fn a_moving_sun_reaches_the_daemon_as_map_deltas() {
+    let sandbox = Sandbox::new("mission-sun");
+    let _daemon = sandbox.start_daemon(&[]);
+    let rate = 0.02;
+    let mission = Mission { sun_azimuth_rate: rate, ..small_mission() };
+    let files = MissionFiles::new(&sandbox, &mission);
+    let recorder = files.recorder("m");
+    let mut viewer = files.viewer("m", "dyfos", 5, &[]);
+    let mut rover = files.rover("m", 5, "0", &[]);
+    let (status, trace) = record_until_exit(recorder, &mut rover);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    assert!(trace.finished());
+
+    let events = viewer.events();
+    assert!(steps_of(&events, "resync").is_empty(), "the daemon's copy never went stale: {events:?}");
+    let uploaded = events[0]["version"].as_u64().expect("map_synced first");
+    let versions: Vec<u64> =
+        steps_of(&events, "answer").iter().map(|(_, e)| e["map_version"].as_u64().unwrap()).collect();
+    assert_eq!(versions.len(), mission.waypoints.len());
+    // Time passes with every flight, so from step 2 on every query moves the sun
+    // by one inline delta: one version each.
+    for pair in versions.windows(2) {
+        assert_eq!(pair[1], pair[0] + 1, "versions {versions:?}");
+    }
+    assert!(versions[0] <= uploaded + 1);
+    let last = steps_of(&events, "rendezvous_received").last().unwrap().1["sim_time"].as_f64().unwrap();
+    let world = sandbox.client().snapshot(1, PATIENCE).expect("snapshot");
+    let expected = mission.world.sun().azimuth + rate * last;
+    assert!((world.sun().azimuth - expected).abs() < 1e-9, "daemon sun {:?}, expected azimuth {expected}", world.sun());
+    assert_eq!(world.version(), *versions.last().unwrap());
 }

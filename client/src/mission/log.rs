@@ -1,5 +1,18 @@
 //! The mission event log: one JSON object per line, flushed as written, so that a
 //! killed process leaves every event it got to.
+//!
+//! ```
+//! use dyfos_client::mission::log::{EventLog, read_events};
+//!
+//! let path = std::env::temp_dir().join(format!("dyfos-log-doc-{}.jsonl", std::process::id()));
+//! let log = EventLog::create(Some(&path), "rover")?;
+//! log.record("arrived", 12.5, serde_json::json!({"step": 3}));
+//! let events = read_events(&path)?;
+//! assert_eq!(events[0]["event"], "arrived");
+//! assert_eq!(events[0]["step"], 3);
+//! # std::fs::remove_file(&path)?;
+//! # Ok::<(), std::io::Error>(())
+//! ```
 
 use std::fs::File;
 use std::io::{BufWriter, Write};

@@ -244,8 +244,8 @@ impl Mission {
         }
         let mean = scenario.belief.mean;
         let viewer_start = match raw.viewer_start {
-            Some(v) => ([v[0], v[1], v[2]], wrap_angle(v[3])),
-            None => ([mean.x, mean.y, 3.0], wrap_angle(mean.z)),
+            Some(v) => ([v[0], v[1], v[2]], wrapped(v[3])),
+            None => ([mean.x, mean.y, 3.0], wrapped(mean.z)),
         };
         Ok(Mission {
             world: scenario.world,
@@ -298,6 +298,11 @@ impl Mission {
         }
         total
     }
+}
+
+/// `a` wrapped into [−π, π), untouched if it already is (so files round-trip exactly).
+fn wrapped(a: f64) -> f64 {
+    if (-std::f64::consts::PI..std::f64::consts::PI).contains(&a) { a } else { wrap_angle(a) }
 }
 
 /// A mission file that cannot be loaded.

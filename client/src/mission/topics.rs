@@ -5,6 +5,19 @@
 //! order does not matter. Subscribers keep up to [`MAX_BUFFER`] samples; a reader
 //! that only needs the latest sample asks for a small buffer and old samples are
 //! overwritten (safe overflow), so a slow reader never blocks a writer.
+//!
+//! ```no_run
+//! use dyfos_client::mission::topics::{Topics, TopicsConfig};
+//! use dyfos_shared::wire::mission::{RENDEZVOUS_TOPIC, RendezvousStateMsg};
+//! use std::time::Duration;
+//!
+//! let topics = Topics::open(&TopicsConfig { prefix: "dyfos/".into(), domain: None, mission: "demo".into() })?;
+//! let inbox = topics.inbox::<RendezvousStateMsg>("mission", RENDEZVOUS_TOPIC, 16)?;
+//! if let Some(msg) = inbox.recv_timeout(Duration::from_secs(1), &|| false) {
+//!     println!("rendezvous at waypoint {}", msg.step);
+//! }
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use crate::Ipc;
 use crate::client::iceoryx_config;

@@ -6,6 +6,15 @@
 //! estimate at its start ([`plan_leg`]); applying the plan to the filter yields
 //! exactly the belief the rover will hold on arrival — the rendezvous belief it
 //! sends the viewer before setting off (the paper's belief propagation).
+//!
+//! ```
+//! use dyfos_client::rover::controller::{DriveConfig, plan_leg};
+//! use dyfos_client::sim::unicycle;
+//!
+//! let plan = plan_leg([0.0, 0.0, 0.0], [2.0, 1.0], &DriveConfig::default());
+//! let end = plan.iter().fold([0.0, 0.0, 0.0], unicycle);
+//! assert!((end[0] - 2.0).hypot(end[1] - 1.0) <= 0.05);
+//! ```
 
 use crate::sim::{Motion, unicycle};
 use dyfos_shared::math::wrap_angle;

@@ -14,6 +14,23 @@
 //! `H = [I₂ 0]`: `y = z − Hs`, `S = HΣHᵀ + R`, `K = ΣHᵀS⁻¹`, `s ← s + Ky` (θ
 //! wrapped into [−π, π)), and the Joseph form `Σ ← (I − KH) Σ (I − KH)ᵀ + K R Kᵀ`,
 //! symmetrized, which stays SPD under rounding.
+//!
+//! ```
+//! use dyfos_client::rover::ekf::Ekf;
+//! use dyfos_client::sim::{Motion, OdometryNoise};
+//! use dyfos_shared::math::Cov2;
+//! use dyfos_shared::posterior::Belief;
+//!
+//! let start = Belief::new([0.0, 0.0, 0.0], [[0.01, 0.0, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 0.01]])?;
+//! let mut ekf = Ekf::new(&start);
+//! for _ in 0..20 {
+//!     ekf.predict(&Motion { distance: 0.1, turn: 0.0 }, &OdometryNoise::default());
+//! }
+//! let before = ekf.cov()[(1, 1)]; // grown by the heading uncertainty over 2 m
+//! ekf.update([2.05, 0.02], &Cov2::from_rows(&[[0.0018, 0.0], [0.0, 0.0018]])?)?;
+//! assert!(ekf.cov()[(1, 1)] < 0.0018 && before > 0.01);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use crate::sim::{Motion, OdometryNoise, unicycle};
 use dyfos_shared::math::{Cov2, Cov3, Matrix2, Matrix3, Vector2, Vector3, wrap_angle};

@@ -12,7 +12,8 @@
 //!    measurement of step i+1; a measurement updates the EKF, anything else — not
 //!    observed, late, or a viewer that is gone — leaves it dead-reckoning, and the
 //!    log says which;
-//! 5. repeats until the goal, then tells the viewer it has finished.
+//! 5. repeats until the goal, then tells the viewer it has finished (and waits,
+//!    at most `linger`, for any evaluation to acknowledge its last sample).
 //!
 //! The simulation half publishes the true pose on `sim/<name>/truth` (read only by
 //! the simulated camera and the evaluation) and the robot half its estimate on
