@@ -24,7 +24,7 @@ mod de;
 mod sampling;
 
 pub use brute::Brute;
-pub use de::DifferentialEvolution;
+pub use de::{DifferentialEvolution, Polish};
 pub use sampling::{CenterView, RandomSampling};
 
 use crate::lupp::{Evaluation, Lupp};

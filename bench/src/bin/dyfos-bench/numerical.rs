@@ -7,7 +7,7 @@ use dyfos_bench::numerical::{NumericalConfig, numerical_maps};
 use dyfos_bench::scaling::{MapKind, obstacle_scaling, scaling_table};
 use dyfos_bench::stats::Summary;
 use dyfos_bench::svg::{Series, ViolinPlot, line_plot};
-use dyfos_service::search::{AnySearch, DifferentialEvolution};
+use dyfos_service::search::{AnySearch, DifferentialEvolution, Polish};
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::params::ModelKind;
 use std::fmt::Write;
@@ -29,8 +29,9 @@ pub struct NumericalArgs {
     #[arg(long, value_delimiter = ',', default_value = "dyfos,dyfos-scipy,brute,random,center", value_parser = parse_algorithm)]
     algos: Vec<Algorithm>,
     /// Also compare a differential evolution setting, as `NAME:key=value,...` starting
-    /// from the `dyfos` default; keys: popsize, tol, atol, generations, polish,
-    /// recombination. Repeatable. Example: `--de tight:tol=0.001,polish=0`.
+    /// from the `dyfos` default; keys: popsize, tol, atol, generations, recombination,
+    /// polish (adaptive polish with at most this many evaluations), compass (the
+    /// compass-search polish instead). Repeatable. Example: `--de before:compass=300`.
     #[arg(long = "de", value_name = "NAME:SETTINGS")]
     de: Vec<String>,
     /// Threads for `brute` (default: all cores); the other algorithms use one.
@@ -49,6 +50,9 @@ pub struct NumericalArgs {
     /// Scaling: cell side of the occupancy-grid version of each map, m; 0 skips it.
     #[arg(long, default_value_t = 0.1)]
     voxel_resolution: f64,
+    /// Also write each evaluated map as a scenario file (`map_NN.json`, for `dyfos solve`) here.
+    #[arg(long, value_name = "DIR")]
+    write_maps: Option<PathBuf>,
     /// Directory for the tables (markdown), raw results (JSON) and plots (SVG).
     #[arg(long, default_value = "bench/out")]
     out: PathBuf,
@@ -91,9 +95,12 @@ fn parse_de(spec: &str) -> anyhow::Result<Contender> {
             "tol" => de.tol = number,
             "atol" => de.atol = number,
             "generations" => de.max_generations = u32::try_from(count()?)?,
-            "polish" => de.polish_evaluations = count()?,
+            "polish" => de.polish = Polish::Adaptive { evaluations: count()? },
+            "compass" => de.polish = Polish::Compass { evaluations: count()? },
             "recombination" => de.recombination = number,
-            _ => bail!("--de `{spec}`: unknown key `{key}` (popsize, tol, atol, generations, polish, recombination)"),
+            _ => bail!(
+                "--de `{spec}`: unknown key `{key}` (popsize, tol, atol, generations, polish, compass, recombination)"
+            ),
         }
     }
     Ok(Contender { name: name.to_string(), search: AnySearch::DifferentialEvolution(de), threads: 1 })
@@ -118,6 +125,13 @@ pub fn run(args: &NumericalArgs) -> anyhow::Result<()> {
         }
         let config = NumericalConfig::paper().model(args.model);
         let maps = numerical_maps(args.seed, args.maps, &config);
+        if let Some(dir) = &args.write_maps {
+            std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+            for (i, map) in maps.iter().enumerate() {
+                let path = dir.join(format!("map_{i:02}.json"));
+                std::fs::write(&path, map.to_json()).with_context(|| format!("cannot write {}", path.display()))?;
+            }
+        }
         eprintln!(
             "numerical: {} maps, model {}, seed {}, {} repeats, brute on {threads} threads",
             args.maps,
@@ -210,7 +224,7 @@ fn evaluation_report(run: &Evaluation, args: &NumericalArgs, threads: usize) -> 
         }
         let _ = writeln!(
             out,
-            "\n| algorithm | gap on brute's median map | gap median | gap max | time ratio to brute (medians) |\n|---|---:|---:|---:|---:|"
+            "\n| algorithm | gap on brute's median map | gap median | gap max | maps > +0.001 | > +0.01 | > +0.1 | time ratio to brute (medians) |\n|---|---:|---:|---:|---:|---:|---:|---:|"
         );
         let brute_time = Summary::of(&run.queries[brute].iter().map(|q| q.seconds).collect::<Vec<_>>());
         for c in &others {
@@ -223,17 +237,21 @@ fn evaluation_report(run: &Evaluation, args: &NumericalArgs, threads: usize) -> 
             };
             match Summary::of(&gaps) {
                 Some(s) => {
+                    let above = |t: f64| gaps.iter().filter(|g| **g > t).count();
                     let _ = writeln!(
                         out,
-                        "| {} | {} | {:+.5} | {:+.5} | {ratio} |",
+                        "| {} | {} | {:+.5} | {:+.5} | {} | {} | {} | {ratio} |",
                         run.names[*c],
                         at_median.map_or("–".into(), |g| format!("{g:+.5}")),
                         s.median,
-                        s.max
+                        s.max,
+                        above(0.001),
+                        above(0.01),
+                        above(0.1)
                     );
                 }
                 None => {
-                    let _ = writeln!(out, "| {} | – | – | – | {ratio} |", run.names[*c]);
+                    let _ = writeln!(out, "| {} | – | – | – | – | – | – | {ratio} |", run.names[*c]);
                 }
             }
         }
