@@ -260,3 +260,13 @@ fn a_moving_sun_reaches_the_daemon_as_map_deltas() {
     assert!((world.sun().azimuth - expected).abs() < 1e-9, "daemon sun {:?}, expected azimuth {expected}", world.sun());
     assert_eq!(world.version(), *versions.last().unwrap());
 }
+
+#[test]
+fn the_example_mission_file_runs_in_the_demo_format() {
+    let mission = Mission::load(Some(&dyfos_tests::data("mission-example.json"))).expect("the example parses");
+    assert_eq!(mission.waypoints.len(), 4);
+    assert_eq!(mission.world.obstacles().len(), 4);
+    assert_eq!(mission.odometry.rot_per_m, 0.001);
+    assert_eq!(mission.odometry.trans_per_m, dyfos_client::sim::OdometryNoise::default().trans_per_m);
+    assert_eq!(mission.sun_azimuth_rate, 0.01);
+}

@@ -39,6 +39,18 @@ impl MissionTrace {
         self.pairs().iter().map(|(t, e)| (e.belief.mean.x - t.pose[0]).hypot(e.belief.mean.y - t.pose[1])).collect()
     }
 
+    /// APE statistics of the samples taken right after an update: how good the
+    /// fused measurements were, without the drift between rendezvous.
+    pub fn ape_after_updates(&self) -> Option<ApeStats> {
+        let errors: Vec<f64> = self
+            .pairs()
+            .iter()
+            .filter(|(_, e)| e.updated)
+            .map(|(t, e)| (e.belief.mean.x - t.pose[0]).hypot(e.belief.mean.y - t.pose[1]))
+            .collect();
+        ApeStats::from_errors(&errors)
+    }
+
     /// APE statistics over every paired sample.
     pub fn ape(&self) -> Option<ApeStats> {
         ApeStats::from_errors(&self.errors())
@@ -145,5 +157,38 @@ impl Recorder {
     pub fn finish(mut self) -> MissionTrace {
         self.poll();
         self.trace
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dyfos_shared::posterior::Belief;
+
+    #[test]
+    fn samples_pair_by_number_and_updates_are_singled_out() {
+        let mut trace = MissionTrace::default();
+        let b = Belief::new([0.0; 3], [[0.01, 0.0, 0.0], [0.0, 0.01, 0.0], [0.0, 0.0, 0.01]]).unwrap();
+        for i in 0..4u64 {
+            // Truth for samples 0..=2 only, arriving out of order.
+            if i < 3 {
+                let pose = [i as f64, 0.0, 0.0];
+                trace.truth.insert(0, TrueState { sample: 2 - i, step: 1, phase: Phase::Driving, sim_time: 0.0, pose });
+            }
+            let belief = Belief { mean: nalgebra::Vector3::new(i as f64, 0.1 * i as f64, 0.0), ..b };
+            let phase = if i == 3 { Phase::Finished } else { Phase::Driving };
+            trace.estimates.push(Estimate { sample: i, step: 1, phase, updated: i == 1, sim_time: 0.0, belief });
+        }
+        // Truth sample k has x = 2 − k; estimate k has (k, 0.1k).
+        let pairs = trace.pairs();
+        assert_eq!(pairs.iter().map(|(t, _)| t.sample).collect::<Vec<_>>(), [0, 1, 2]);
+        let errors = trace.errors();
+        assert!((errors[0] - 2.0).abs() < 1e-12 && (errors[1] - 0.1).abs() < 1e-12);
+        assert!((errors[2] - 2.0f64.hypot(0.2)).abs() < 1e-12);
+        assert_eq!(trace.ape().unwrap().count, 3);
+        let after = trace.ape_after_updates().unwrap();
+        assert_eq!(after.count, 1);
+        assert!((after.max - 0.1).abs() < 1e-12);
+        assert!(trace.finished() && trace.updates() == 1 && trace.step() == 1);
     }
 }

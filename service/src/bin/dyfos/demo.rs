@@ -344,6 +344,7 @@ fn summary_json(results: &[RunResult]) -> serde_json::Value {
         .map(|r| {
             serde_json::json!({
                 "arm": r.arm.name(), "seed": r.seed, "ape_m": r.ape,
+                "ape_after_updates_m": r.trace.ape_after_updates(),
                 "updates": r.trace.updates(),
                 "rendezvous": r.trace.measurements.len(),
             })
