@@ -5,6 +5,9 @@
 //!
 //! - [`numerical`]: the seeded random maps of SPEC §10, with voxel variants;
 //! - [`evaluation`]: runs search algorithms over maps, tabulates cost E and run time;
+//! - [`latency`]: the request mix, drivers, in-process baseline and iceoryx2 floor of
+//!   `dyfos-bench latency`;
+//! - [`learned`]: the learned SDSMM against the synthetic camera it was trained on;
 //! - [`scaling`]: `dyfos` query time as the map grows;
 //! - [`stats`], [`svg`]: summaries and plots for the reports.
 //!
@@ -19,6 +22,8 @@
 //! ```
 
 pub mod evaluation;
+pub mod latency;
+pub mod learned;
 pub mod numerical;
 pub mod scaling;
 pub mod stats;

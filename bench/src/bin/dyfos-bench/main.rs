@@ -5,6 +5,8 @@
 //! Add a benchmark by adding a module with an `Args` struct and a `run` function,
 //! and one variant to [`Command`].
 
+mod latency;
+mod learned;
 mod numerical;
 
 use clap::{Parser, Subcommand};
@@ -23,11 +25,23 @@ enum Command {
     /// The paper's numerical evaluation (SPEC §10): E and run time per algorithm on
     /// seeded random maps, and query time as the map grows.
     Numerical(numerical::NumericalArgs),
+    /// Query latency and throughput of dyfosd (closed and open loop, N client
+    /// processes), against the in-process call and iceoryx2's raw round trip.
+    Latency(latency::LatencyArgs),
+    /// One client process of `latency` (started by it).
+    #[command(hide = true)]
+    LatencyWorker(latency::WorkerArgs),
+    /// The learned SDSMM against the synthetic camera it was trained on: held-out
+    /// NLL, std plots, planning judged by the true model, query time (issue 7).
+    Learned(learned::LearnedArgs),
 }
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Numerical(args) => numerical::run(&args),
+        Command::Latency(args) => latency::run(&args),
+        Command::LatencyWorker(args) => latency::worker(&args),
+        Command::Learned(args) => learned::run(&args),
     }
 }
 

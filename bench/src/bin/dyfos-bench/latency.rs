@@ -1,0 +1,732 @@
+//! `dyfos-bench latency`: query latency and throughput of `dyfosd` (issue 5).
+//!
+//! Starts its own `dyfosd` (found next to this executable; own service prefix,
+//! iceoryx2 domain and temporary state directory), uploads the SPEC §10 numerical
+//! maps, and for each configuration starts N client processes — this executable in
+//! its hidden `latency-worker` mode — which connect, warm up, wait for a common
+//! start signal on stdin, run for T seconds and write their samples to a file. The
+//! coordinator merges them, runs the in-process baseline and iceoryx2's raw
+//! request-response floor (a busy-polling server thread here, client processes as
+//! above), stops the daemon with SIGTERM, and prints and writes the report.
+
+use anyhow::{Context, bail};
+use dyfos_bench::latency::{
+    Arrivals, FloorClient, Latencies, RequestSet, RunSamples, Workload, drive, in_process, map_id, serve_floor,
+};
+use dyfos_bench::svg::{Series, line_plot};
+use dyfos_client::{Client, ClientConfig, RendezvousError};
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::io::{BufRead, BufReader, Write as _};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdout, Command, ExitStatus, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+/// Flags of `dyfos-bench latency`.
+#[derive(Debug, clap::Args)]
+pub struct LatencyArgs {
+    /// Seconds each configuration runs.
+    #[arg(long, default_value_t = 2.0)]
+    seconds: f64,
+    /// Closed loop: numbers of client processes, each sending back to back.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16")]
+    clients: Vec<usize>,
+    /// Open loop: null-query (and floor) rates, requests per second over all clients.
+    #[arg(long, value_delimiter = ',', default_value = "1000,10000")]
+    null_rates: Vec<f64>,
+    /// Open loop: `dyfos` query rates, per second over all clients.
+    #[arg(long, value_delimiter = ',', default_value = "250,500")]
+    dyfos_rates: Vec<f64>,
+    /// Open loop: client processes sharing the rate.
+    #[arg(long, default_value_t = 4)]
+    open_clients: usize,
+    /// Workloads to run, comma-separated: `floor` (raw iceoryx2 round trip), `null`
+    /// (check-mode queries), `dyfos` (searches).
+    #[arg(long, value_delimiter = ',', default_value = "floor,null,dyfos", value_parser = parse_workload)]
+    workloads: Vec<Workload>,
+    /// Numerical maps (SPEC §10) the queries cycle over.
+    #[arg(long, default_value_t = 20)]
+    maps: usize,
+    /// Seed of the maps, searches and arrival schedules.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The daemon binary (default: `dyfosd` next to this executable).
+    #[arg(long)]
+    dyfosd: Option<PathBuf>,
+    /// A flag for the daemon, e.g. `--daemon-arg=--spin-us=1000`; repeatable.
+    #[arg(long = "daemon-arg", value_name = "FLAG", allow_hyphen_values = true)]
+    daemon_args: Vec<String>,
+    /// Directory for the table (markdown), summary (JSON) and plots (SVG).
+    #[arg(long, default_value = "bench/out")]
+    out: PathBuf,
+}
+
+/// Flags of the hidden `latency-worker` mode: one client process.
+#[derive(Debug, clap::Args)]
+pub struct WorkerArgs {
+    #[arg(long)]
+    prefix: String,
+    #[arg(long)]
+    domain: String,
+    #[arg(long, value_parser = parse_workload)]
+    workload: Workload,
+    /// Requests per second of this client; 0 for a closed loop.
+    #[arg(long, default_value_t = 0.0)]
+    rate: f64,
+    #[arg(long)]
+    seconds: f64,
+    #[arg(long)]
+    seed: u64,
+    #[arg(long)]
+    maps: usize,
+    /// This client's index (its first map and its arrival stream).
+    #[arg(long)]
+    index: usize,
+    /// The floor's service name.
+    #[arg(long, default_value = "")]
+    floor_service: String,
+    /// Where to write the samples (JSON).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+fn parse_workload(s: &str) -> Result<Workload, String> {
+    Workload::from_name(s).ok_or_else(|| format!("unknown workload `{s}`: use floor, null or dyfos"))
+}
+
+const TIMEOUT: Duration = Duration::from_secs(30);
+
+fn error_name(e: &RendezvousError) -> String {
+    match e {
+        RendezvousError::Rejected(r) | RendezvousError::Invalid(r) => r.status.name().to_string(),
+        RendezvousError::Timeout(_) => "timeout".into(),
+        RendezvousError::DaemonGone => "daemon_gone".into(),
+        RendezvousError::NoDaemon { .. } | RendezvousError::Connect(_) => "no_daemon".into(),
+        RendezvousError::Ipc(_) => "ipc".into(),
+    }
+}
+
+/// Tells the coordinator this client is connected and warm, then waits for `go`.
+fn ready_then_go() -> anyhow::Result<()> {
+    println!("ready");
+    std::io::stdout().flush()?;
+    let mut line = String::new();
+    std::io::stdin().read_line(&mut line)?;
+    if line.trim() != "go" {
+        bail!("expected `go` on stdin, got `{}`", line.trim());
+    }
+    Ok(())
+}
+
+/// The `latency-worker` mode: one client process.
+pub fn worker(args: &WorkerArgs) -> anyhow::Result<()> {
+    let set = RequestSet::new(args.seed, args.maps);
+    let arrivals = if args.rate > 0.0 { Arrivals::Open { rate: args.rate } } else { Arrivals::Closed };
+    let duration = Duration::from_secs_f64(args.seconds);
+    let stream = args.index as u64;
+    let samples = match args.workload {
+        Workload::Floor => {
+            let mut floor = FloorClient::open(&args.domain, &args.floor_service, &set.requests[0], TIMEOUT)
+                .map_err(anyhow::Error::msg)?;
+            for _ in 0..200 {
+                floor.call(TIMEOUT).map_err(anyhow::Error::msg)?;
+            }
+            ready_then_go()?;
+            drive(arrivals, duration, args.seed, stream, |_| floor.call(TIMEOUT))
+        }
+        workload @ (Workload::Null | Workload::Dyfos) => {
+            let config = ClientConfig {
+                prefix: args.prefix.clone(),
+                domain: Some(args.domain.clone()),
+                connect_timeout: TIMEOUT,
+                ..ClientConfig::default()
+            };
+            let mut client = Client::connect(&config)?;
+            let mut call = |k: usize| {
+                let (_, request) = set.pick(args.index, k);
+                if workload == Workload::Null {
+                    client.check(request, TIMEOUT).map(|_| None).map_err(|e| error_name(&e))
+                } else {
+                    client.rendezvous(request, TIMEOUT).map(|a| Some(a.micros)).map_err(|e| error_name(&e))
+                }
+            };
+            let warm_up = if workload == Workload::Null { 200 } else { 2 };
+            for k in 0..warm_up {
+                call(k).map_err(|e| anyhow::anyhow!("warm-up request failed: {e}"))?;
+            }
+            ready_then_go()?;
+            drive(arrivals, duration, args.seed, stream, call)
+        }
+    };
+    let json = serde_json::to_string(&samples)?;
+    std::fs::write(&args.out, json).with_context(|| format!("cannot write {}", args.out.display()))?;
+    Ok(())
+}
+
+/// A child process killed on drop unless it was waited for.
+struct Guard(Option<Child>);
+
+impl Guard {
+    fn id(&self) -> u32 {
+        self.0.as_ref().map_or(0, Child::id)
+    }
+
+    fn wait_timeout(&mut self, limit: Duration) -> anyhow::Result<ExitStatus> {
+        let child = self.0.as_mut().context("process already reaped")?;
+        let start = Instant::now();
+        loop {
+            if let Some(status) = child.try_wait()? {
+                self.0 = None;
+                return Ok(status);
+            }
+            if start.elapsed() > limit {
+                bail!("process {} did not exit within {limit:?}", child.id());
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+}
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.0.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// Everything the run shares: paths, names, the requests.
+struct Bench<'a> {
+    args: &'a LatencyArgs,
+    exe: PathBuf,
+    prefix: String,
+    domain: String,
+    tmp: PathBuf,
+    floor_service: String,
+}
+
+/// One configuration's merged result.
+#[derive(Debug, Clone)]
+struct Row {
+    workload: Workload,
+    clients: usize,
+    /// Offered rate for open loop.
+    rate: Option<f64>,
+    throughput: f64,
+    latency: Option<Latencies>,
+    /// `dyfos`: search time in the daemon, and end-to-end minus search.
+    search: Option<Latencies>,
+    overhead: Option<Latencies>,
+    errors: BTreeMap<String, u64>,
+    unsent: u64,
+}
+
+impl Row {
+    fn of(workload: Workload, clients: usize, rate: Option<f64>, runs: Vec<RunSamples>) -> Row {
+        let throughput =
+            runs.iter().filter(|r| r.elapsed_s > 0.0).map(|r| r.latency_ns.len() as f64 / r.elapsed_s).sum();
+        let mut latency: Vec<u64> = Vec::new();
+        let mut search: Vec<u64> = Vec::new();
+        let mut overhead: Vec<u64> = Vec::new();
+        let mut errors = BTreeMap::new();
+        let mut unsent = 0;
+        for r in runs {
+            if r.search_us.len() == r.latency_ns.len() {
+                for (ns, us) in r.latency_ns.iter().zip(&r.search_us) {
+                    search.push(us * 1000);
+                    overhead.push(ns.saturating_sub(us * 1000));
+                }
+            }
+            latency.extend(r.latency_ns);
+            for (k, v) in r.errors {
+                *errors.entry(k).or_default() += v;
+            }
+            unsent += r.unsent;
+        }
+        Row {
+            workload,
+            clients,
+            rate,
+            throughput,
+            latency: Latencies::of_nanos(&mut latency),
+            search: Latencies::of_nanos(&mut search),
+            overhead: Latencies::of_nanos(&mut overhead),
+            errors,
+            unsent,
+        }
+    }
+}
+
+impl Bench<'_> {
+    /// Runs `clients` worker processes of `workload` for one configuration.
+    fn run_config(&self, workload: Workload, clients: usize, rate: Option<f64>) -> anyhow::Result<Row> {
+        let a = self.args;
+        let label = match rate {
+            None => format!("{} closed loop, {clients} client(s)", workload.name()),
+            Some(r) => format!("{} open loop, {r}/s over {clients} client(s)", workload.name()),
+        };
+        eprintln!("latency: {label}");
+        let mut children = Vec::new();
+        let mut outputs = Vec::new();
+        for i in 0..clients {
+            let out = self.tmp.join(format!("{}-{i}.json", workload.name()));
+            let _ = std::fs::remove_file(&out);
+            let per_client = rate.map_or(0.0, |r| r / clients as f64);
+            let child = Command::new(&self.exe)
+                .arg("latency-worker")
+                .args(["--prefix", &self.prefix, "--domain", &self.domain, "--workload", workload.name()])
+                .args(["--rate", &per_client.to_string(), "--seconds", &a.seconds.to_string()])
+                .args(["--seed", &a.seed.to_string(), "--maps", &a.maps.to_string(), "--index", &i.to_string()])
+                .args(["--floor-service", &self.floor_service])
+                .arg("--out")
+                .arg(&out)
+                .stdin(Stdio::piped())
+                .stdout(Stdio::piped())
+                .stderr(Stdio::inherit())
+                .spawn()
+                .with_context(|| format!("cannot start {}", self.exe.display()))?;
+            children.push(Guard(Some(child)));
+            outputs.push(out);
+        }
+        // Everyone connected and warm: start together.
+        for g in &mut children {
+            let stdout: ChildStdout = g.0.as_mut().and_then(|c| c.stdout.take()).context("worker stdout")?;
+            let mut line = String::new();
+            BufReader::new(stdout).read_line(&mut line)?;
+            if line.trim() != "ready" {
+                bail!("client process {} failed before the start (see its error above)", g.id());
+            }
+        }
+        for g in &mut children {
+            let stdin = g.0.as_mut().and_then(|c| c.stdin.as_mut()).context("worker stdin")?;
+            stdin.write_all(b"go\n")?;
+            stdin.flush()?;
+        }
+        let limit = Duration::from_secs_f64(a.seconds * 3.0) + TIMEOUT;
+        let mut runs = Vec::new();
+        for (g, out) in children.iter_mut().zip(&outputs) {
+            let status = g.wait_timeout(limit)?;
+            if !status.success() {
+                bail!("client process of `{label}` failed ({status})");
+            }
+            let text = std::fs::read_to_string(out).with_context(|| format!("cannot read {}", out.display()))?;
+            runs.push(serde_json::from_str::<RunSamples>(&text).with_context(|| format!("{}", out.display()))?);
+            let _ = std::fs::remove_file(out);
+        }
+        Ok(Row::of(workload, clients, rate, runs))
+    }
+}
+
+/// Starts `dyfosd` for the bench and waits until it serves.
+fn start_daemon(b: &Bench, dyfosd: &Path, state: &Path, log: &Path) -> anyhow::Result<Guard> {
+    let log_file = std::fs::File::create(log).with_context(|| format!("cannot create {}", log.display()))?;
+    let child = Command::new(dyfosd)
+        .args(["--prefix", &b.prefix, "--domain", &b.domain, "--state-dir"])
+        .arg(state)
+        .args(&b.args.daemon_args)
+        .env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into()))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(log_file)
+        .spawn()
+        .with_context(|| format!("cannot start {}", dyfosd.display()))?;
+    Ok(Guard(Some(child)))
+}
+
+/// SIGTERM, then wait for a clean exit.
+fn stop_daemon(daemon: &mut Guard) -> anyhow::Result<ExitStatus> {
+    let ok = Command::new("kill").arg("-TERM").arg(daemon.id().to_string()).status().is_ok_and(|s| s.success());
+    if !ok {
+        bail!("could not send SIGTERM to dyfosd ({})", daemon.id());
+    }
+    daemon.wait_timeout(TIMEOUT)
+}
+
+/// Shared-memory files of `domain` left in /dev/shm (iceoryx2's per-domain node
+/// counter `*.global_mgmt` is kept by design), removed after listing.
+fn shm_leftovers(domain: &str) -> Vec<String> {
+    let mut left = Vec::new();
+    if let Ok(entries) = std::fs::read_dir("/dev/shm") {
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.starts_with(domain) {
+                if !name.ends_with(".global_mgmt") {
+                    left.push(name);
+                }
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
+    left
+}
+
+fn us(v: f64) -> String {
+    if v >= 100.0 { format!("{v:.0}") } else { format!("{v:.1}") }
+}
+
+fn errors_cell(row: &Row) -> String {
+    let mut parts: Vec<String> = row.errors.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    if row.unsent > 0 {
+        parts.push(format!("unsent {}", row.unsent));
+    }
+    if parts.is_empty() { "0".into() } else { parts.join(", ") }
+}
+
+fn latency_cells(l: Option<Latencies>) -> String {
+    match l {
+        Some(l) => {
+            format!("{} | {} | {} | {} | {}", us(l.p50_us), us(l.p90_us), us(l.p99_us), us(l.p999_us), us(l.max_us))
+        }
+        None => "– | – | – | – | –".into(),
+    }
+}
+
+fn table(rows: &[&Row], open: bool) -> String {
+    let mut out = String::new();
+    if open {
+        out.push_str("| workload | clients | offered /s | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    } else {
+        out.push_str("| workload | clients | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---|\n");
+    }
+    for r in rows {
+        let offered = r.rate.map_or(String::new(), |x| format!(" {x:.0} |"));
+        let _ = writeln!(
+            out,
+            "| {} | {} |{offered} {:.0} | {} | {} |",
+            r.workload.name(),
+            r.clients,
+            r.throughput,
+            latency_cells(r.latency),
+            errors_cell(r)
+        );
+    }
+    out
+}
+
+/// Runs the benchmark, prints the report, writes the files.
+pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
+    if !(args.seconds > 0.0 && args.seconds.is_finite()) {
+        bail!("--seconds must be positive");
+    }
+    if args.clients.contains(&0) || args.open_clients == 0 {
+        bail!("client counts must be at least 1");
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    let exe = std::env::current_exe().context("cannot find this executable")?;
+    let dyfosd = match &args.dyfosd {
+        Some(p) => p.clone(),
+        None => exe.with_file_name("dyfosd"),
+    };
+    if !dyfosd.exists() {
+        bail!(
+            "{} not found; build it next to dyfos-bench (`cargo build --release --workspace --bins`) or pass --dyfosd",
+            dyfosd.display()
+        );
+    }
+    let pid = std::process::id();
+    let tmp = std::env::temp_dir().join(format!("dyfos-bench-latency-{pid}"));
+    std::fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+    let b = Bench {
+        args,
+        exe,
+        prefix: format!("bench-latency-{pid}/"),
+        domain: format!("dyb{pid}_"),
+        floor_service: format!("bench-latency-{pid}/floor"),
+        tmp: tmp.clone(),
+    };
+    let result = run_with_daemon(&b, &dyfosd);
+    let left = shm_leftovers(&b.domain);
+    let _ = std::fs::remove_dir_all(&tmp);
+    let (report, rows, shutdown) = result?;
+    let mut report = report;
+    let _ = writeln!(
+        report,
+        "\nDaemon shutdown: {shutdown}; shared-memory files left in /dev/shm: {}.",
+        if left.is_empty() { "none".to_string() } else { left.join(", ") }
+    );
+    write_files(args, &report, &rows)?;
+    println!("{report}");
+    Ok(())
+}
+
+type Outcome = (String, Vec<Row>, String);
+
+fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
+    let a = b.args;
+    let set = RequestSet::new(a.seed, a.maps);
+    let duration = Duration::from_secs_f64(a.seconds);
+    let state = b.tmp.join("state");
+    let log = b.tmp.join("dyfosd.log");
+    let mut daemon = start_daemon(b, dyfosd, &state, &log)?;
+    let config = ClientConfig {
+        prefix: b.prefix.clone(),
+        domain: Some(b.domain.clone()),
+        connect_timeout: TIMEOUT,
+        ..ClientConfig::default()
+    };
+    let mut client = Client::connect(&config).with_context(|| {
+        format!("dyfosd did not start; its log:\n{}", std::fs::read_to_string(&log).unwrap_or_default())
+    })?;
+    let workers = client.stats(TIMEOUT)?.workers;
+    for (i, s) in set.scenarios.iter().enumerate() {
+        client.upload_map(map_id(i), &s.world, false, TIMEOUT).with_context(|| format!("uploading map {i}"))?;
+    }
+
+    let mut rows = Vec::new();
+    for w in &a.workloads {
+        match w {
+            Workload::Floor => {
+                let stop = Arc::new(AtomicBool::new(false));
+                let server = {
+                    let (domain, service, stop) = (b.domain.clone(), b.floor_service.clone(), Arc::clone(&stop));
+                    let max = a.open_clients.max(1);
+                    std::thread::spawn(move || serve_floor(&domain, &service, max, &stop))
+                };
+                let mut run = || -> anyhow::Result<()> {
+                    rows.push(b.run_config(Workload::Floor, 1, None)?);
+                    for r in &a.null_rates {
+                        rows.push(b.run_config(Workload::Floor, a.open_clients, Some(*r))?);
+                    }
+                    Ok(())
+                };
+                let result = run();
+                stop.store(true, std::sync::atomic::Ordering::Relaxed);
+                let served = server.join().map_err(|_| anyhow::anyhow!("floor server panicked"))?;
+                result?;
+                served.map_err(anyhow::Error::msg)?;
+            }
+            Workload::Null | Workload::Dyfos => {
+                for n in &a.clients {
+                    rows.push(b.run_config(*w, *n, None)?);
+                }
+                let rates = if *w == Workload::Null { &a.null_rates } else { &a.dyfos_rates };
+                for r in rates {
+                    rows.push(b.run_config(*w, a.open_clients, Some(*r))?);
+                }
+            }
+        }
+    }
+    let stats = client.stats(TIMEOUT)?;
+    drop(client);
+    let shutdown = match stop_daemon(&mut daemon)? {
+        s if s.success() => "clean (SIGTERM, exit 0)".to_string(),
+        s => format!("NOT clean: {s}; log:\n{}", std::fs::read_to_string(&log).unwrap_or_default()),
+    };
+
+    // In-process baselines, with the daemon gone (the machine is quiet).
+    eprintln!("latency: in-process baselines");
+    let mut baselines = Vec::new();
+    for w in [Workload::Null, Workload::Dyfos] {
+        if a.workloads.contains(&w) {
+            baselines.push((w, Row::of(w, 1, None, vec![in_process(w, &set, duration)])));
+        }
+    }
+
+    let mut report = String::new();
+    let _ = writeln!(
+        report,
+        "## Query latency and throughput\n\n{} s per configuration, {} numerical maps (SPEC §10, seed {}), dyfosd with {} workers{}.\n",
+        a.seconds,
+        a.maps,
+        a.seed,
+        workers,
+        if a.daemon_args.is_empty() { String::new() } else { format!(" and `{}`", a.daemon_args.join(" ")) }
+    );
+    let closed: Vec<&Row> = rows.iter().filter(|r| r.rate.is_none()).collect();
+    let open: Vec<&Row> = rows.iter().filter(|r| r.rate.is_some()).collect();
+    report.push_str("### Closed loop (each client sends its next request when the last is answered)\n\n");
+    report.push_str(&table(&closed, false));
+    if !open.is_empty() {
+        report.push_str("\n### Open loop (Poisson arrivals; latency from the scheduled send time)\n\n");
+        report.push_str(&table(&open, true));
+    }
+    report.push_str(&comparison(&rows, &baselines));
+    let _ = writeln!(
+        report,
+        "\nDaemon counters at the end: {} queries served, {} requests failed, latency in the daemon (receipt to reply, last {} queries) p50 {} µs, p99 {} µs.",
+        stats.queries_served,
+        stats.requests_failed,
+        stats.latency_samples,
+        stats.latency_micros[0],
+        stats.latency_micros[2]
+    );
+    rows.extend(baselines.into_iter().map(|(_, r)| Row { clients: 0, ..r }));
+    Ok((report, rows, shutdown))
+}
+
+fn find(rows: &[Row], w: Workload, clients: usize) -> Option<&Row> {
+    rows.iter().find(|r| r.workload == w && r.clients == clients && r.rate.is_none())
+}
+
+/// The floor, the in-process call and the daemon side by side, and the targets.
+fn comparison(rows: &[Row], baselines: &[(Workload, Row)]) -> String {
+    let mut out = String::from("\n### Daemon against the in-process call and the iceoryx2 floor (one client)\n\n");
+    out.push_str("| path | p50 µs | p99 µs | p50 ratio to the daemon |\n|---|---:|---:|---:|\n");
+    let base = |w| baselines.iter().find(|(b, _)| *b == w).map(|(_, r)| r);
+    let null = find(rows, Workload::Null, 1).and_then(|r| r.latency);
+    let mut line = |name: &str, l: Option<Latencies>, reference: Option<Latencies>| {
+        if let Some(l) = l {
+            let ratio = reference.map_or("–".into(), |r| format!("{:.3}", l.p50_us / r.p50_us));
+            let _ = writeln!(out, "| {name} | {} | {} | {ratio} |", us(l.p50_us), us(l.p99_us));
+        }
+    };
+    line(
+        "iceoryx2 raw request-response, busy-polled (floor)",
+        find(rows, Workload::Floor, 1).and_then(|r| r.latency),
+        null,
+    );
+    line("daemon null query (check mode)", null, null);
+    line("in-process validation of the same request", base(Workload::Null).and_then(|r| r.latency), null);
+    let dyfos = find(rows, Workload::Dyfos, 1);
+    let dyfos_l = dyfos.and_then(|r| r.latency);
+    line("daemon `dyfos` query", dyfos_l, dyfos_l);
+    line("in-process `dyfos` query (`solve`, one thread)", base(Workload::Dyfos).and_then(|r| r.latency), dyfos_l);
+    if let Some(d) = dyfos {
+        line("  of which search in the daemon", d.search, dyfos_l);
+        line("  of which outside the search (end-to-end − search)", d.overhead, dyfos_l);
+    }
+
+    out.push_str("\n### Targets (2 cores)\n\n| target | measured | met |\n|---|---|---|\n");
+    let yes = |ok: bool| if ok { "yes" } else { "**no**" };
+    // Null query "while traffic flows": the open-loop null rows and the 1–2 client closed loops.
+    for r in rows.iter().filter(|r| r.workload == Workload::Null && (r.rate.is_some() || r.clients <= 2)) {
+        if let Some(l) = r.latency {
+            let what = match r.rate {
+                Some(x) => format!("open loop {x:.0}/s, {} clients", r.clients),
+                None => format!("closed loop, {} client(s)", r.clients),
+            };
+            let _ = writeln!(
+                out,
+                "| null query p50 ≤ 10 µs, p99 ≤ 50 µs ({what}) | p50 {} µs, p99 {} µs | {} |",
+                us(l.p50_us),
+                us(l.p99_us),
+                yes(l.p50_us <= 10.0 && l.p99_us <= 50.0)
+            );
+        }
+    }
+    if let Some(r) = find(rows, Workload::Dyfos, 4) {
+        let _ = writeln!(
+            out,
+            "| `dyfos` ≥ 500 queries/s with 4 clients (closed loop) | {:.0}/s | {} |",
+            r.throughput,
+            yes(r.throughput >= 500.0)
+        );
+    }
+    if let (Some(d), Some(inproc)) = (dyfos_l, base(Workload::Dyfos).and_then(|r| r.latency)) {
+        let extra = (d.p50_us - inproc.p50_us) / inproc.p50_us * 100.0;
+        let _ = writeln!(
+            out,
+            "| daemon overhead ≤ 5 % of a `dyfos` query (1 client, p50 end-to-end vs in-process) | {extra:+.1} % ({} vs {} µs) | {} |",
+            us(d.p50_us),
+            us(inproc.p50_us),
+            yes(extra <= 5.0)
+        );
+    }
+    if let Some(d) = dyfos
+        && let (Some(o), Some(s)) = (d.overhead, d.search)
+    {
+        let _ = writeln!(
+            out,
+            "| … same, per query: end-to-end − search time, p50 | {} µs = {:.1} % of the search p50 | {} |",
+            us(o.p50_us),
+            o.p50_us / s.p50_us * 100.0,
+            yes(o.p50_us / s.p50_us <= 0.05)
+        );
+    }
+    out
+}
+
+/// Reads one percentile of a [`Latencies`].
+type Percentile = fn(&Latencies) -> f64;
+
+fn write_files(args: &LatencyArgs, report: &str, rows: &[Row]) -> anyhow::Result<()> {
+    let write = |name: &str, text: &str| -> anyhow::Result<()> {
+        let path = args.out.join(name);
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+        Ok(())
+    };
+    write("latency.md", report)?;
+    let json: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|r| {
+            let l = |l: Option<Latencies>| {
+                l.map(|l| {
+                    serde_json::json!({"count": l.count, "p50_us": l.p50_us, "p90_us": l.p90_us, "p99_us": l.p99_us,
+                        "p999_us": l.p999_us, "max_us": l.max_us, "mean_us": l.mean_us})
+                })
+            };
+            serde_json::json!({
+                "workload": r.workload.name(),
+                "path": if r.clients == 0 { "in-process" } else { "daemon" },
+                "clients": r.clients,
+                "offered_per_s": r.rate,
+                "answered_per_s": r.throughput,
+                "latency": l(r.latency),
+                "search": l(r.search),
+                "overhead": l(r.overhead),
+                "errors": r.errors,
+                "unsent": r.unsent,
+            })
+        })
+        .collect();
+    write("latency.json", &serde_json::to_string_pretty(&json)?)?;
+    for w in [Workload::Null, Workload::Dyfos] {
+        let closed: Vec<&Row> = rows.iter().filter(|r| r.workload == w && r.rate.is_none() && r.clients > 0).collect();
+        if closed.is_empty() {
+            continue;
+        }
+        let pick: [(&str, Percentile); 5] = [
+            ("p50", |l| l.p50_us),
+            ("p90", |l| l.p90_us),
+            ("p99", |l| l.p99_us),
+            ("p99.9", |l| l.p999_us),
+            ("max", |l| l.max_us),
+        ];
+        let mut series: Vec<Series> = pick
+            .iter()
+            .map(|(name, f)| Series {
+                name: (*name).into(),
+                points: closed.iter().filter_map(|r| Some((r.clients as f64, f(&r.latency?)))).collect(),
+            })
+            .collect();
+        let reference = match w {
+            Workload::Null => rows.iter().find(|r| r.workload == Workload::Floor && r.rate.is_none()),
+            _ => rows.iter().find(|r| r.workload == w && r.clients == 0),
+        };
+        if let Some(l) = reference.and_then(|r| r.latency) {
+            let name = if w == Workload::Null { "iceoryx2 floor p50" } else { "in-process p50" };
+            let xs = closed.iter().map(|r| r.clients as f64);
+            series.push(Series { name: name.into(), points: xs.map(|x| (x, l.p50_us)).collect() });
+        }
+        let svg = line_plot(
+            &format!("{} query latency, closed loop", w.name()),
+            "client processes",
+            "latency, µs",
+            &series,
+            true,
+        );
+        write(&format!("latency-{}.svg", w.name()), &svg)?;
+    }
+    let throughput: Vec<Series> = [Workload::Null, Workload::Dyfos]
+        .iter()
+        .map(|w| Series {
+            name: format!("{} queries/s", w.name()),
+            points: rows
+                .iter()
+                .filter(|r| r.workload == *w && r.rate.is_none() && r.clients > 0)
+                .map(|r| (r.clients as f64, r.throughput))
+                .collect(),
+        })
+        .filter(|s| !s.points.is_empty())
+        .collect();
+    if !throughput.is_empty() {
+        let svg =
+            line_plot("Throughput, closed loop", "client processes", "answered queries per second", &throughput, true);
+        write("latency-throughput.svg", &svg)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,65 @@
+//! A short run of `dyfos-bench latency` so the command cannot rot: it starts its own
+//! `dyfosd`, client processes of every workload in closed and open loop, merges
+//! their samples, and stops the daemon cleanly. No timing is asserted; the numbers
+//! are in `bench/RESULTS.md`.
+//!
+//! Needs `dyfosd` built next to `dyfos-bench` (`cargo build --workspace --bins`).
+
+use std::process::Command;
+
+#[test]
+fn latency_command_smoke_run() {
+    let exe = std::path::PathBuf::from(env!("CARGO_BIN_EXE_dyfos-bench"));
+    let dyfosd = exe.with_file_name("dyfosd");
+    assert!(
+        dyfosd.exists(),
+        "{} is missing: run `cargo build --workspace --bins` before `cargo test`",
+        dyfosd.display()
+    );
+    let out = std::env::temp_dir().join(format!("dyfos-bench-latency-smoke-{}", std::process::id()));
+    let output = Command::new(&exe)
+        .args(["latency", "--seconds", "0.2", "--clients", "1,2", "--open-clients", "2", "--maps", "2"])
+        .args(["--null-rates", "300", "--dyfos-rates", "30"])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("dyfos-bench runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(output.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&output.stderr));
+    for row in [
+        "| floor | 1 | ",
+        "| null | 1 | ",
+        "| null | 2 | ",
+        "| dyfos | 2 | ",
+        "| null | 2 | 300 | ",
+        "| dyfos | 2 | 30 | ",
+    ] {
+        assert!(stdout.contains(row), "missing `{row}` in\n{stdout}");
+    }
+    assert!(stdout.contains("in-process `dyfos` query"), "{stdout}");
+    assert!(stdout.contains("Daemon shutdown: clean (SIGTERM, exit 0)"), "{stdout}");
+    assert!(stdout.contains("shared-memory files left in /dev/shm: none"), "{stdout}");
+
+    let rows: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("latency.json")).expect("latency.json")).unwrap();
+    let rows = rows.as_array().unwrap();
+    // floor: 1 closed + 1 open; null and dyfos: 2 closed + 1 open each; 2 in-process.
+    assert_eq!(rows.len(), 10, "{rows:#?}");
+    for r in rows {
+        assert!(r["answered_per_s"].as_f64().unwrap() > 0.0, "nothing answered: {r}");
+        assert!(r["errors"].as_object().unwrap().is_empty(), "errors: {r}");
+        let l = &r["latency"];
+        assert!(l["p50_us"].as_f64().unwrap() <= l["p99_us"].as_f64().unwrap(), "{r}");
+        assert!(l["p99_us"].as_f64().unwrap() <= l["max_us"].as_f64().unwrap(), "{r}");
+        if r["workload"] == "dyfos" {
+            assert!(r["search"]["count"].as_u64().unwrap() > 0, "no search times: {r}");
+        }
+    }
+    for file in ["latency.md", "latency-null.svg", "latency-dyfos.svg", "latency-throughput.svg"] {
+        let text = std::fs::read_to_string(out.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
+        assert!(text.len() > 200, "{file} is nearly empty");
+    }
+    let bad = Command::new(&exe).args(["latency", "--workloads", "nap", "--out"]).arg(&out).output().unwrap();
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("use floor, null or dyfos"));
+    let _ = std::fs::remove_dir_all(&out);
+}
