@@ -15,6 +15,7 @@
 //! ```
 
 pub mod daemon;
+pub mod learned;
 pub mod lupp;
 pub mod search;
 pub mod store;

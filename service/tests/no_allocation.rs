@@ -60,13 +60,19 @@ fn worlds() -> Vec<(&'static str, Scenario)> {
     out
 }
 
+/// The committed learned model (tests/data/learned).
+fn learned_weights() -> std::sync::Arc<dyfos_shared::sdsmm::Learned> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/learned/model.bin");
+    dyfos_service::learned::load_model(&path).unwrap()
+}
+
 #[test]
 fn lupp_evaluate_allocates_nothing() {
     let grid = Brute { grid: [9, 7, 5, 24] };
     for (name, s) in worlds() {
-        for model in [ModelKind::Paper, ModelKind::Anisotropic] {
+        for model in [ModelKind::Paper, ModelKind::Anisotropic, ModelKind::Learned] {
             let params = Params { model, ..s.params };
-            let noise = NoiseModel::from_params(&params).unwrap();
+            let noise = NoiseModel::from_params_and_weights(&params, Some(&learned_weights())).unwrap();
             let lupp = Lupp::new(&s.world, &s.belief, &params, &noise);
             let candidates: Vec<SensorState> = (0..grid.len()).map(|i| grid.point(lupp.space(), i)).collect();
             let mut verdicts = [0usize; 4];

@@ -20,7 +20,9 @@
 //! minimises paper eq. 5's negative log-likelihood, `½·Σ(ln det R + eᵀR⁻¹e)` (the
 //! printed equation carries a stray minus sign: it is the log-likelihood).
 //!
-//! The forward pass runs in `f32` on stack arrays: no allocation per candidate.
+//! The forward pass runs in `f32` on stack arrays: no allocation per candidate. Its
+//! `tanh` is a rational approximation within 1e-6 of the exact one (the training
+//! framework's), which lets each layer vectorize.
 //! Weights come from bytes ([`Learned::from_bytes`]); the file is read by the
 //! binaries. A file that is truncated, corrupt, of another format or of the wrong
 //! shape is a [`LearnedModelError`] at load, never a failure later.
@@ -214,6 +216,11 @@ pub enum LearnedModelError {
 #[derive(Clone, PartialEq)]
 pub struct Learned {
     weights: LearnedWeights,
+    /// `w1`, `w2`, `w3` transposed (input-major), so each layer is a sum of scaled
+    /// contiguous rows: no horizontal sums, and the compiler vectorizes it.
+    t1: Vec<f32>,
+    t2: Vec<f32>,
+    t3: Vec<f32>,
 }
 
 impl std::fmt::Debug for Learned {
@@ -282,21 +289,41 @@ impl<'b> Reader<'b> {
     }
 }
 
+/// `rows × cols` row-major → `cols × rows` row-major.
+fn transpose(m: &[f32], rows: usize, cols: usize) -> Vec<f32> {
+    (0..cols).flat_map(|c| (0..rows).map(move |r| m[r * cols + c])).collect()
+}
+
+/// `out = bias + Wᵀ-major weights · input` (`wt` is input-major: row i holds the
+/// weights of input i to every output).
 #[inline]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    // Four independent accumulators: lets the compiler keep several lanes busy.
-    let mut acc = [0f32; 4];
-    let chunks = a.len() / 4 * 4;
-    for (ca, cb) in a[..chunks].chunks_exact(4).zip(b[..chunks].chunks_exact(4)) {
-        for k in 0..4 {
-            acc[k] += ca[k] * cb[k];
+fn layer(input: &[f32], wt: &[f32], bias: &[f32], out: &mut [f32]) {
+    out.copy_from_slice(bias);
+    for (x, row) in input.iter().zip(wt.chunks_exact(out.len())) {
+        for (o, w) in out.iter_mut().zip(row) {
+            *o += w * x;
         }
     }
-    let mut tail = 0f32;
-    for (x, y) in a[chunks..].iter().zip(&b[chunks..]) {
-        tail += x * y;
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+}
+
+/// tanh in `f32` by a rational minimax approximation (Eigen's `ptanh_float`
+/// coefficients): branch-free, so a layer of them vectorizes; within 1e-6 of the
+/// exact value (checked in the tests), far below the model's own error.
+#[inline]
+fn fast_tanh(x: f32) -> f32 {
+    let x = x.clamp(-7.905_311, 7.905_311);
+    let x2 = x * x;
+    let mut p = x2 * -2.760_768_5e-16 + 2.000_188e-13;
+    p = p * x2 + -8.604_672e-11;
+    p = p * x2 + 5.122_297e-8;
+    p = p * x2 + 1.485_722_4e-5;
+    p = p * x2 + 6.372_619_3e-4;
+    p = p * x2 + 4.893_524_6e-3;
+    p *= x;
+    let mut q = x2 * 1.198_258_4e-6 + 1.185_347_1e-4;
+    q = q * x2 + 2.268_434_6e-3;
+    q = q * x2 + 4.893_525e-3;
+    p / q
 }
 
 impl Learned {
@@ -334,7 +361,10 @@ impl Learned {
         if weights.note.len() > MAX_NOTE {
             return Err(LearnedModelError::Note { reason: "longer than 64 KiB" });
         }
-        Ok(Learned { weights })
+        let t1 = transpose(&weights.w1, h, LEARNED_INPUTS);
+        let t2 = transpose(&weights.w2, h, h);
+        let t3 = transpose(&weights.w3, LEARNED_OUTPUTS, h);
+        Ok(Learned { weights, t1, t2, t3 })
     }
 
     /// The weights.
@@ -467,18 +497,14 @@ impl Learned {
         let h = w.hidden;
         let x: [f32; LEARNED_INPUTS] = std::array::from_fn(|i| (input[i] as f32 - w.input_mean[i]) / w.input_std[i]);
         let mut h1 = [0f32; MAX_HIDDEN];
-        for (j, (out, row)) in h1[..h].iter_mut().zip(w.w1.chunks_exact(LEARNED_INPUTS)).enumerate() {
-            *out = (w.b1[j] + dot(row, &x)).tanh();
-        }
+        layer(&x, &self.t1, &w.b1, &mut h1[..h]);
+        h1[..h].iter_mut().for_each(|v| *v = fast_tanh(*v));
         let mut h2 = [0f32; MAX_HIDDEN];
-        for (j, (out, row)) in h2[..h].iter_mut().zip(w.w2.chunks_exact(h)).enumerate() {
-            *out = (w.b2[j] + dot(row, &h1[..h])).tanh();
-        }
-        let mut out = [0f64; LEARNED_OUTPUTS];
-        for (k, (o, row)) in out.iter_mut().zip(w.w3.chunks_exact(h)).enumerate() {
-            *o = f64::from(w.b3[k] + dot(row, &h2[..h]));
-        }
-        out
+        layer(&h1[..h], &self.t2, &w.b2, &mut h2[..h]);
+        h2[..h].iter_mut().for_each(|v| *v = fast_tanh(*v));
+        let mut out = [0f32; LEARNED_OUTPUTS];
+        layer(&h2[..h], &self.t3, &w.b3, &mut out);
+        out.map(f64::from)
     }
 }
 
@@ -566,6 +592,18 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn fast_tanh_is_within_1e6_of_tanh() {
+        let mut worst = 0f64;
+        for i in -200_000..=200_000 {
+            let x = i as f32 * 1e-4; // −20 … 20
+            worst = worst.max((f64::from(fast_tanh(x)) - f64::from(x).tanh()).abs());
+        }
+        assert!(worst < 1e-6, "{worst}");
+        assert_eq!(fast_tanh(0.0), 0.0);
+        assert!((fast_tanh(f32::INFINITY) - 1.0).abs() < 1e-6 && (fast_tanh(f32::NEG_INFINITY) + 1.0).abs() < 1e-6);
     }
 
     #[test]

@@ -7,6 +7,7 @@
 mod demo;
 mod offline;
 mod online;
+mod train;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -35,6 +36,10 @@ enum Command {
     Map(online::MapCommand),
     /// Print dyfosd's health and counters as JSON.
     Stats(online::StatsArgs),
+    /// Simulate camera measurements for training the learned SDSMM.
+    TrainData(train::TrainDataArgs),
+    /// Train the learned SDSMM on a data set (needs a build with `--features train`).
+    Train(train::TrainArgs),
 }
 
 /// An error with the exit code it deserves.
@@ -82,6 +87,8 @@ fn run(cli: Cli) -> Result<(), Failure> {
         Command::Query(args) => online::query(&args),
         Command::Map(command) => online::map(&command),
         Command::Stats(args) => online::stats(&args),
+        Command::TrainData(args) => train::train_data(&args),
+        Command::Train(args) => train::train(&args),
     }
 }
 

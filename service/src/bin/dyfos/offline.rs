@@ -27,6 +27,9 @@ pub struct SolveArgs {
     /// Worker threads for `brute` (default: all cores; the answer does not change).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Model file of the learned SDSMM (written by `dyfos train`); implies `"model": "learned"`.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
 }
 
 /// Flags of `dyfos eval`.
@@ -37,6 +40,9 @@ pub struct EvalArgs {
     /// The candidate: ρ (m), ψ, φ, ψ_v (rad).
     #[arg(long, num_args = 4, value_names = ["RHO", "PSI", "PHI", "YAW"], allow_negative_numbers = true, required = true)]
     pub x: Vec<f64>,
+    /// Model file of the learned SDSMM (written by `dyfos train`); implies `"model": "learned"`.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
 }
 
 pub fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
@@ -54,14 +60,24 @@ pub fn load_scenario(path: &Path) -> Result<Scenario, Failure> {
     Scenario::from_json(&text).map_err(|e| Failure::invalid(anyhow::anyhow!("{}: {e}", path.display())))
 }
 
-fn model_of(scenario: &Scenario, path: &Path) -> Result<NoiseModel, Failure> {
-    NoiseModel::from_params(&scenario.params).map_err(|e| Failure::invalid(anyhow::anyhow!("{}: {e}", path.display())))
+/// The scenario's SDSMM; a `--model` file selects `learned` with its weights. A
+/// missing or unusable model file is exit code 2, before any search.
+fn model_of(scenario: &mut Scenario, path: &Path, model_file: Option<&Path>) -> Result<NoiseModel, Failure> {
+    let weights = match model_file {
+        Some(file) => {
+            scenario.params.model = ModelKind::Learned;
+            Some(dyfos_service::learned::load_model(file).map_err(Failure::invalid)?)
+        }
+        None => None,
+    };
+    NoiseModel::from_params_and_weights(&scenario.params, weights.as_ref())
+        .map_err(|e| Failure::invalid(anyhow::anyhow!("{}: {e}", path.display())))
 }
 
 /// `dyfos solve`.
 pub fn solve(args: &SolveArgs) -> Result<(), Failure> {
-    let scenario = load_scenario(&args.scenario)?;
-    let model = model_of(&scenario, &args.scenario)?;
+    let mut scenario = load_scenario(&args.scenario)?;
+    let model = model_of(&mut scenario, &args.scenario, args.model.as_deref())?;
     let mut control = SearchControl::seeded(args.seed);
     control.budget = args.budget;
     if let Some(t) = args.threads {
@@ -75,8 +91,8 @@ pub fn solve(args: &SolveArgs) -> Result<(), Failure> {
 
 /// `dyfos eval`.
 pub fn eval(args: &EvalArgs) -> Result<(), Failure> {
-    let scenario = load_scenario(&args.scenario)?;
-    let model = model_of(&scenario, &args.scenario)?;
+    let mut scenario = load_scenario(&args.scenario)?;
+    let model = model_of(&mut scenario, &args.scenario, args.model.as_deref())?;
     let x = [args.x[0], args.x[1], args.x[2], args.x[3]];
     if let Some(bad) = x.iter().find(|v| !v.is_finite()) {
         return Err(Failure::invalid(anyhow::anyhow!("--x: {bad} is not a finite number")));
