@@ -127,8 +127,7 @@ pub fn image_features(params: &Params, line: ImageLine, points: usize) -> Vec<Fe
 }
 
 /// Standard deviations along and across the line of sight as the rover moves along
-/// `line` of the image: two series per model (one for an isotropic model's equal
-/// pair would do, but the plot keeps the layout fixed). x is u or v.
+/// `line` of the image: two series per model (one for an isotropic model). x is u or v.
 pub fn std_over_image(models: &[(String, NoiseModel)], params: &Params, line: ImageLine) -> Vec<Series> {
     let features = image_features(params, line, 41);
     let coord = |f: &Features| match line {
@@ -138,6 +137,13 @@ pub fn std_over_image(models: &[(String, NoiseModel)], params: &Params, line: Im
     let mut series = Vec::new();
     for (name, model) in models {
         let std: Vec<(f64, (f64, f64))> = features.iter().map(|f| (coord(f), principal_std(model, f))).collect();
+        if std.iter().all(|(_, (a, c))| (a - c).abs() <= 1e-12 * a.max(*c)) {
+            series.push(Series {
+                name: format!("{name} (isotropic)"),
+                points: std.iter().map(|(x, s)| (*x, s.0)).collect(),
+            });
+            continue;
+        }
         series.push(Series { name: format!("{name}: along"), points: std.iter().map(|(x, s)| (*x, s.0)).collect() });
         series.push(Series { name: format!("{name}: across"), points: std.iter().map(|(x, s)| (*x, s.1)).collect() });
     }

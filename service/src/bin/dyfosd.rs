@@ -6,11 +6,11 @@
 //! iceoryx2's own log included (`IOX2_LOG_LEVEL`, default warn).
 //!
 //! Exit codes: 0 after SIGINT/SIGTERM once the queries in flight are answered;
-//! 2 for a bad flag or configuration; 1 if the daemon cannot start.
+//! 2 for a bad flag, configuration or model file; 1 if the daemon cannot start.
 
 use anyhow::Context;
 use clap::Parser;
-use dyfos_service::daemon::{Daemon, DaemonConfig, HOUSEKEEPING, WaitOutcome};
+use dyfos_service::daemon::{Daemon, DaemonConfig, DaemonCreateError, HOUSEKEEPING, WaitOutcome};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -26,7 +26,7 @@ struct Cli {
     #[arg(long)]
     state_dir: Option<PathBuf>,
     /// TOML file with any of: prefix, state_dir, domain, workers, spin_us,
-    /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s.
+    /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s, model.
     #[arg(long)]
     config: Option<PathBuf>,
     /// iceoryx2 file prefix: only processes of the same domain see each other (default iceoryx2's `iox2_`).
@@ -44,6 +44,9 @@ struct Cli {
     /// Most queries waiting for a worker before `busy` (default 256).
     #[arg(long)]
     max_queued: Option<usize>,
+    /// Model file of the learned SDSMM (from `dyfos train`), for queries with model `learned`.
+    #[arg(long, value_name = "FILE")]
+    model: Option<PathBuf>,
 }
 
 /// The TOML file's keys; each is optional and a flag overrides it.
@@ -59,6 +62,7 @@ struct FileConfig {
     max_requests_per_client: Option<usize>,
     max_queued: Option<usize>,
     upload_idle_timeout_s: Option<u64>,
+    model: Option<PathBuf>,
 }
 
 fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
@@ -80,6 +84,7 @@ fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
         max_requests_per_client: file.max_requests_per_client.unwrap_or(d.max_requests_per_client),
         max_queued: cli.max_queued.or(file.max_queued).unwrap_or(d.max_queued),
         upload_idle_timeout: file.upload_idle_timeout_s.map_or(d.upload_idle_timeout, Duration::from_secs),
+        model: cli.model.clone().or(file.model).or(d.model),
     })
 }
 
@@ -140,7 +145,8 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             eprintln!("dyfosd: {e:#}");
-            ExitCode::from(1)
+            // A bad model file is a configuration error, like a bad flag.
+            ExitCode::from(if matches!(e, DaemonCreateError::Model(_)) { 2 } else { 1 })
         }
     }
 }

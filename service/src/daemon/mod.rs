@@ -82,6 +82,9 @@ pub struct DaemonConfig {
     pub spin: Duration,
     /// An upload with no new chunk for this long is abandoned.
     pub upload_idle_timeout: Duration,
+    /// Model file of the learned SDSMM (`--model`), loaded at start; without one,
+    /// queries for model `learned` are refused (`unsupported_model`).
+    pub model: Option<PathBuf>,
 }
 
 /// `$XDG_STATE_HOME/dyfos`, else `~/.local/state/dyfos`, else `./dyfos-state`.
@@ -107,6 +110,7 @@ impl Default for DaemonConfig {
             max_queued: 256,
             spin: Duration::from_micros(200),
             upload_idle_timeout: Duration::from_secs(30),
+            model: None,
         }
     }
 }
@@ -143,6 +147,9 @@ pub enum DaemonCreateError {
     /// Any other iceoryx2 failure.
     #[error("iceoryx2: {0}")]
     Ipc(String),
+    /// The learned model file is missing, corrupt or of the wrong shape.
+    #[error(transparent)]
+    Model(#[from] crate::learned::ModelLoadError),
 }
 
 fn ipc_err(e: impl std::fmt::Debug) -> DaemonCreateError {
@@ -180,6 +187,8 @@ pub(crate) struct Shared {
     pub(crate) reply: Notifier<Ipc>,
     pub(crate) stats: Mutex<stats::Stats>,
     pub(crate) threads: usize,
+    /// Weights of the learned SDSMM, if `--model` was given.
+    pub(crate) learned: Option<Arc<dyfos_shared::sdsmm::Learned>>,
 }
 
 impl Shared {
@@ -236,6 +245,7 @@ impl Daemon {
                 return Err(DaemonCreateError::InvalidLimit(name));
             }
         }
+        let learned = config.model.as_deref().map(crate::learned::load_model).transpose()?;
         let iox = iceoryx_config(config.domain.as_deref())?;
         let store = Store::open(&config.state_dir)?;
         let loaded = store.load_all();
@@ -327,6 +337,7 @@ impl Daemon {
             reply,
             stats: Mutex::new(stats::Stats::new()),
             threads,
+            learned,
         });
         let workers = (0..threads)
             .map(|i| {

@@ -5,6 +5,7 @@ use super::{Daemon, Ipc, Shared};
 use crate::search::SearchControl;
 use crate::{SearchError, solve};
 use dyfos_shared::answer::{Algorithm, StopReason};
+use dyfos_shared::params::ModelKind;
 use dyfos_shared::sdsmm::NoiseModel;
 use dyfos_shared::wire::map::WireDelta;
 use dyfos_shared::wire::rendezvous::{Mode, RendezvousReply, RendezvousRequest, RendezvousRequestHeader};
@@ -145,7 +146,7 @@ fn run(shared: &Shared, job: Job) {
             ),
         )
     } else {
-        match NoiseModel::from_params(&request.params) {
+        match NoiseModel::from_params_and_weights(&request.params, shared.learned.as_ref()) {
             Err(e) => RendezvousReply::rejected(request_id, &Rejection::new(Status::UnsupportedModel, e.to_string())),
             Ok(model) => {
                 let control =
@@ -201,6 +202,12 @@ fn accept(daemon: &mut Daemon, header: &RendezvousRequestHeader, records: &[Wire
         return Err(Rejection::new(Status::ShuttingDown, "dyfosd is shutting down; retry when it is back"));
     }
     let (request, mode) = RendezvousRequest::decode(header, records)?;
+    if request.params.model == ModelKind::Learned && daemon.shared.learned.is_none() {
+        return Err(Rejection::new(
+            Status::UnsupportedModel,
+            "params.model = learned needs trained weights, which this daemon has not loaded; start dyfosd with --model FILE (from `dyfos train`), or use paper or anisotropic",
+        ));
+    }
     let world = daemon.maps.get(request.map).ok_or_else(|| unknown_map(request.map))?;
     check_version(request.map, &world, request.expected_version)?;
     if mode == Mode::Solve {

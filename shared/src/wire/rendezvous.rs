@@ -279,13 +279,9 @@ impl RendezvousRequest {
         })?;
         let belief =
             Belief::new(h.mean, h.cov).map_err(|e| Rejection::new(Status::InvalidBelief, format!("belief: {e}")))?;
+        // `learned` decodes like any model; whether the daemon has weights for it is
+        // the daemon's check (it refuses it with `unsupported_model` if not).
         let params = Params::try_from(&h.params)?;
-        if params.model == ModelKind::Learned {
-            return Err(Rejection::new(
-                Status::UnsupportedModel,
-                "params.model = learned needs trained weights, which this daemon has not loaded; use paper or anisotropic",
-            ));
-        }
         if h.deadline_micros > MAX_DEADLINE_MICROS {
             return Err(Rejection::new(
                 Status::InvalidDeadline,
@@ -522,12 +518,13 @@ mod tests {
                 Status::InvalidParams,
             ),
             (RendezvousRequestHeader { params: WireParams { model: 3, ..h.params }, ..h }, Status::InvalidParams),
-            (RendezvousRequestHeader { params: WireParams { model: 2, ..h.params }, ..h }, Status::UnsupportedModel),
             (RendezvousRequestHeader { deadline_micros: MAX_DEADLINE_MICROS + 1, ..h }, Status::InvalidDeadline),
         ];
         for (bad, expected) in cases {
             assert_eq!(status(bad), expected, "{bad:?}");
         }
+        let learned = RendezvousRequestHeader { params: WireParams { model: 2, ..h.params }, ..h };
+        assert_eq!(RendezvousRequest::decode(&learned, &[]).unwrap().0.params.model, ModelKind::Learned);
         let too_many =
             vec![WireDelta { tag: super::super::map::tag::CLEAR, ..Default::default() }; MAX_INLINE_DELTAS + 1];
         assert_eq!(RendezvousRequest::decode(&h, &too_many).unwrap_err().status, Status::OverCapacity);

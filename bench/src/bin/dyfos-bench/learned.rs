@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, clap::Args)]
 pub struct LearnedArgs {
     /// The trained model file.
-    #[arg(long, default_value = "bench/data/learned.bin")]
+    #[arg(long, default_value = "tests/data/learned/model.bin")]
     model: PathBuf,
     /// Held-out simulated measurements for the NLL and the std fit.
     #[arg(long, default_value_t = 100_000)]
