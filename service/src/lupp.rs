@@ -133,6 +133,8 @@ pub struct Lupp<'a> {
     rig: SensorRig,
     space: SearchSpace,
     sun: Vector3<f64>,
+    /// `[tan(f_h/2), tan(f_v/2)]` for the image coordinates.
+    half_fov_tangents: [f64; 2],
     /// p_t, then the perimeter points (SPEC §2 order).
     targets: Vec<Point3<f64>>,
     /// The belief's mean heading θ (for the `learned` model's relative bearing).
@@ -161,6 +163,7 @@ impl<'a> Lupp<'a> {
             rig: SensorRig::new(params),
             space: SearchSpace::new(params),
             sun: world.sun().direction(),
+            half_fov_tangents: Features::half_fov_tangents(params),
             targets,
             heading: theta,
             reach: params.viewer_radius + params.safety_margin,
@@ -201,7 +204,8 @@ impl<'a> Lupp<'a> {
     /// belief's mean heading.
     #[inline]
     pub fn features(&self, pose: &SensorPose) -> Features {
-        Features::new(&self.params, &self.sun, pose, &self.targets[0]).with_rover_heading(self.heading)
+        Features::with_half_fov_tangents(&self.params, self.half_fov_tangents, &self.sun, pose, &self.targets[0])
+            .with_rover_heading(self.heading)
     }
 
     #[inline]

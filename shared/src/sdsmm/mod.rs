@@ -75,9 +75,27 @@ impl Features {
     /// true states of a simulation.
     #[inline]
     pub fn new(params: &Params, sun: &Vector3<f64>, pose: &SensorPose, target: &Point3<f64>) -> Self {
+        Self::with_half_fov_tangents(params, Self::half_fov_tangents(params), sun, pose, target)
+    }
+
+    /// `[tan(f_h/2), tan(f_v/2)]`, for [`Features::with_half_fov_tangents`].
+    pub fn half_fov_tangents(params: &Params) -> [f64; 2] {
+        [(params.f_h / 2.0).tan(), (params.f_v / 2.0).tan()]
+    }
+
+    /// [`Features::new`] with the tangents of the half fields of view computed once
+    /// per request instead of per candidate (the same numbers, bit for bit).
+    #[inline]
+    pub fn with_half_fov_tangents(
+        params: &Params,
+        half_fov_tangents: [f64; 2],
+        sun: &Vector3<f64>,
+        pose: &SensorPose,
+        target: &Point3<f64>,
+    ) -> Self {
         let q = pose.to_sensor(target);
-        let u = (q.y / q.x) / (params.f_h / 2.0).tan();
-        let v = (q.z / q.x) / (params.f_v / 2.0).tan();
+        let u = (q.y / q.x) / half_fov_tangents[0];
+        let v = (q.z / q.x) / half_fov_tangents[1];
         let e = u.abs().max(v.abs()).min(1.0);
         let to_sensor = pose.position - target;
         let rho = to_sensor.norm();
@@ -87,7 +105,9 @@ impl Features {
             0.0
         } else {
             let reflected = Vector3::new(-sun.x, -sun.y, sun.z);
-            2.0 * reflected.dot(&w).max(0.0).powf(params.kappa)
+            let g = reflected.dot(&w).max(0.0);
+            // pow(g, 1) is g exactly (IEEE 754); the default κ skips the call.
+            2.0 * if params.kappa == 1.0 { g } else { g.powf(params.kappa) }
         };
         let elevation = w.z.atan2(w.x.hypot(w.y));
         let bearing = (target.y - pose.position.y).atan2(target.x - pose.position.x);
