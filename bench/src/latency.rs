@@ -167,6 +167,9 @@ pub struct RunSamples {
     pub search_us: Vec<u64>,
     /// Requests answered with an error, by error name.
     pub errors: BTreeMap<String, u64>,
+    /// Open loop: how late each request was sent after its scheduled time, ns (the
+    /// client process's own scheduling delay; part of its latency).
+    pub late_ns: Vec<u64>,
     /// Open loop: scheduled requests never sent (the client fell too far behind).
     pub unsent: u64,
     /// Wall time of the measured part, s.
@@ -234,6 +237,7 @@ pub fn drive(
                     out.unsent = (schedule.len() - k) as u64;
                     break;
                 }
+                out.late_ns.push(u64::try_from(target.elapsed().as_nanos()).unwrap_or(u64::MAX));
                 let outcome = call(k);
                 record(&mut out, outcome, target);
             }
@@ -463,6 +467,10 @@ mod tests {
         let late = run.latency_ns.iter().filter(|n| **n > 1_000_000).count();
         assert!(late >= 10, "only {late} requests charged for the wait");
         assert_eq!(run.unsent, 0);
+        assert_eq!(run.late_ns.len(), run.latency_ns.len());
+        // Sent late exactly when charged for the wait.
+        let late = run.late_ns.iter().filter(|n| **n > 1_000_000).count();
+        assert!(late >= 10, "{late}");
     }
 
     #[test]

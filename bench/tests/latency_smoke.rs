@@ -19,7 +19,7 @@ fn latency_command_smoke_run() {
     let out = std::env::temp_dir().join(format!("dyfos-bench-latency-smoke-{}", std::process::id()));
     let output = Command::new(&exe)
         .args(["latency", "--seconds", "0.2", "--clients", "1,2", "--open-clients", "2", "--maps", "2"])
-        .args(["--null-rates", "300", "--dyfos-rates", "30"])
+        .args(["--null-rates", "300", "--dyfos-rates", "30", "--mixed-null-rate", "300", "--mixed-dyfos-clients", "1"])
         .arg("--out")
         .arg(&out)
         .output()
@@ -37,14 +37,17 @@ fn latency_command_smoke_run() {
         assert!(stdout.contains(row), "missing `{row}` in\n{stdout}");
     }
     assert!(stdout.contains("in-process `dyfos` query"), "{stdout}");
+    assert!(stdout.contains("### Mixed"), "{stdout}");
     assert!(stdout.contains("Daemon shutdown: clean (SIGTERM, exit 0)"), "{stdout}");
     assert!(stdout.contains("shared-memory files left in /dev/shm: none"), "{stdout}");
 
     let rows: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("latency.json")).expect("latency.json")).unwrap();
     let rows = rows.as_array().unwrap();
-    // floor: 1 closed + 1 open; null and dyfos: 2 closed + 1 open each; 2 in-process.
-    assert_eq!(rows.len(), 10, "{rows:#?}");
+    // floor: 1 closed + 1 open; null and dyfos: 2 closed + 1 open each; the mixed
+    // run's two groups; 2 in-process.
+    assert_eq!(rows.len(), 12, "{rows:#?}");
+    assert_eq!(rows.iter().filter(|r| !r["alongside"].is_null()).count(), 2);
     for r in rows {
         assert!(r["answered_per_s"].as_f64().unwrap() > 0.0, "nothing answered: {r}");
         assert!(r["errors"].as_object().unwrap().is_empty(), "errors: {r}");

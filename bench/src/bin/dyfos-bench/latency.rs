@@ -58,6 +58,13 @@ pub struct LatencyArgs {
     /// A flag for the daemon, e.g. `--daemon-arg=--spin-us=1000`; repeatable.
     #[arg(long = "daemon-arg", value_name = "FLAG", allow_hyphen_values = true)]
     daemon_args: Vec<String>,
+    /// Mixed run: null-query rate (one client, open loop) while `--mixed-dyfos-clients`
+    /// send `dyfos` queries back to back; 0 skips it.
+    #[arg(long, default_value_t = 1000.0)]
+    mixed_null_rate: f64,
+    /// Mixed run: `dyfos` clients keeping the workers busy.
+    #[arg(long, default_value_t = 4)]
+    mixed_dyfos_clients: usize,
     /// Directory for the table (markdown), summary (JSON) and plots (SVG).
     #[arg(long, default_value = "bench/out")]
     out: PathBuf,
@@ -208,15 +215,45 @@ struct Bench<'a> {
     floor_service: String,
 }
 
-/// One configuration's merged result.
+/// Client processes of one workload in one configuration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Group {
+    workload: Workload,
+    clients: usize,
+    /// Open loop: requests per second over all of the group's clients.
+    rate: Option<f64>,
+}
+
+impl Group {
+    fn closed(workload: Workload, clients: usize) -> Self {
+        Group { workload, clients, rate: None }
+    }
+
+    fn open(workload: Workload, clients: usize, rate: f64) -> Self {
+        Group { workload, clients, rate: Some(rate) }
+    }
+
+    fn label(&self) -> String {
+        match self.rate {
+            None => format!("{} closed loop, {} client(s)", self.workload.name(), self.clients),
+            Some(r) => format!("{} open loop, {r}/s over {} client(s)", self.workload.name(), self.clients),
+        }
+    }
+}
+
+/// One group's merged result.
 #[derive(Debug, Clone)]
 struct Row {
     workload: Workload,
     clients: usize,
     /// Offered rate for open loop.
     rate: Option<f64>,
+    /// The other groups that ran at the same time, if any.
+    alongside: Option<String>,
     throughput: f64,
     latency: Option<Latencies>,
+    /// Open loop: how late the client processes sent (their own scheduling delay).
+    late: Option<Latencies>,
     /// `dyfos`: search time in the daemon, and end-to-end minus search.
     search: Option<Latencies>,
     overhead: Option<Latencies>,
@@ -225,10 +262,11 @@ struct Row {
 }
 
 impl Row {
-    fn of(workload: Workload, clients: usize, rate: Option<f64>, runs: Vec<RunSamples>) -> Row {
+    fn of(group: Group, runs: Vec<RunSamples>) -> Row {
         let throughput =
             runs.iter().filter(|r| r.elapsed_s > 0.0).map(|r| r.latency_ns.len() as f64 / r.elapsed_s).sum();
         let mut latency: Vec<u64> = Vec::new();
+        let mut late: Vec<u64> = Vec::new();
         let mut search: Vec<u64> = Vec::new();
         let mut overhead: Vec<u64> = Vec::new();
         let mut errors = BTreeMap::new();
@@ -241,17 +279,20 @@ impl Row {
                 }
             }
             latency.extend(r.latency_ns);
+            late.extend(r.late_ns);
             for (k, v) in r.errors {
                 *errors.entry(k).or_default() += v;
             }
             unsent += r.unsent;
         }
         Row {
-            workload,
-            clients,
-            rate,
+            workload: group.workload,
+            clients: group.clients,
+            rate: group.rate,
+            alongside: None,
             throughput,
             latency: Latencies::of_nanos(&mut latency),
+            late: Latencies::of_nanos(&mut late),
             search: Latencies::of_nanos(&mut search),
             overhead: Latencies::of_nanos(&mut overhead),
             errors,
@@ -261,62 +302,71 @@ impl Row {
 }
 
 impl Bench<'_> {
-    /// Runs `clients` worker processes of `workload` for one configuration.
-    fn run_config(&self, workload: Workload, clients: usize, rate: Option<f64>) -> anyhow::Result<Row> {
+    /// Runs one configuration: the client processes of every group at once.
+    fn run_groups(&self, groups: &[Group]) -> anyhow::Result<Vec<Row>> {
         let a = self.args;
-        let label = match rate {
-            None => format!("{} closed loop, {clients} client(s)", workload.name()),
-            Some(r) => format!("{} open loop, {r}/s over {clients} client(s)", workload.name()),
-        };
+        let label: Vec<String> = groups.iter().map(Group::label).collect();
+        let label = label.join(" + ");
         eprintln!("latency: {label}");
         let mut children = Vec::new();
         let mut outputs = Vec::new();
-        for i in 0..clients {
-            let out = self.tmp.join(format!("{}-{i}.json", workload.name()));
-            let _ = std::fs::remove_file(&out);
-            let per_client = rate.map_or(0.0, |r| r / clients as f64);
-            let child = Command::new(&self.exe)
-                .arg("latency-worker")
-                .args(["--prefix", &self.prefix, "--domain", &self.domain, "--workload", workload.name()])
-                .args(["--rate", &per_client.to_string(), "--seconds", &a.seconds.to_string()])
-                .args(["--seed", &a.seed.to_string(), "--maps", &a.maps.to_string(), "--index", &i.to_string()])
-                .args(["--floor-service", &self.floor_service])
-                .arg("--out")
-                .arg(&out)
-                .stdin(Stdio::piped())
-                .stdout(Stdio::piped())
-                .stderr(Stdio::inherit())
-                .spawn()
-                .with_context(|| format!("cannot start {}", self.exe.display()))?;
-            children.push(Guard(Some(child)));
-            outputs.push(out);
+        for (g, group) in groups.iter().enumerate() {
+            for i in 0..group.clients {
+                let out = self.tmp.join(format!("{}-{g}-{i}.json", group.workload.name()));
+                let _ = std::fs::remove_file(&out);
+                let per_client = group.rate.map_or(0.0, |r| r / group.clients as f64);
+                let child = Command::new(&self.exe)
+                    .arg("latency-worker")
+                    .args(["--prefix", &self.prefix, "--domain", &self.domain, "--workload", group.workload.name()])
+                    .args(["--rate", &per_client.to_string(), "--seconds", &a.seconds.to_string()])
+                    .args(["--seed", &a.seed.to_string(), "--maps", &a.maps.to_string(), "--index", &i.to_string()])
+                    .args(["--floor-service", &self.floor_service])
+                    .arg("--out")
+                    .arg(&out)
+                    .stdin(Stdio::piped())
+                    .stdout(Stdio::piped())
+                    .stderr(Stdio::inherit())
+                    .spawn()
+                    .with_context(|| format!("cannot start {}", self.exe.display()))?;
+                children.push(Guard(Some(child)));
+                outputs.push((g, out));
+            }
         }
         // Everyone connected and warm: start together.
-        for g in &mut children {
-            let stdout: ChildStdout = g.0.as_mut().and_then(|c| c.stdout.take()).context("worker stdout")?;
+        for c in &mut children {
+            let stdout: ChildStdout = c.0.as_mut().and_then(|c| c.stdout.take()).context("worker stdout")?;
             let mut line = String::new();
             BufReader::new(stdout).read_line(&mut line)?;
             if line.trim() != "ready" {
-                bail!("client process {} failed before the start (see its error above)", g.id());
+                bail!("client process {} failed before the start (see its error above)", c.id());
             }
         }
-        for g in &mut children {
-            let stdin = g.0.as_mut().and_then(|c| c.stdin.as_mut()).context("worker stdin")?;
+        for c in &mut children {
+            let stdin = c.0.as_mut().and_then(|c| c.stdin.as_mut()).context("worker stdin")?;
             stdin.write_all(b"go\n")?;
             stdin.flush()?;
         }
         let limit = Duration::from_secs_f64(a.seconds * 3.0) + TIMEOUT;
-        let mut runs = Vec::new();
-        for (g, out) in children.iter_mut().zip(&outputs) {
-            let status = g.wait_timeout(limit)?;
+        let mut runs: Vec<Vec<RunSamples>> = vec![Vec::new(); groups.len()];
+        for (c, (g, out)) in children.iter_mut().zip(&outputs) {
+            let status = c.wait_timeout(limit)?;
             if !status.success() {
                 bail!("client process of `{label}` failed ({status})");
             }
             let text = std::fs::read_to_string(out).with_context(|| format!("cannot read {}", out.display()))?;
-            runs.push(serde_json::from_str::<RunSamples>(&text).with_context(|| format!("{}", out.display()))?);
+            runs[*g].push(serde_json::from_str::<RunSamples>(&text).with_context(|| format!("{}", out.display()))?);
             let _ = std::fs::remove_file(out);
         }
-        Ok(Row::of(workload, clients, rate, runs))
+        let rows = groups.iter().zip(runs).enumerate().map(|(g, (group, runs))| {
+            let others: Vec<String> =
+                groups.iter().enumerate().filter(|(o, _)| *o != g).map(|(_, o)| o.label()).collect();
+            Row { alongside: (!others.is_empty()).then(|| others.join(" + ")), ..Row::of(*group, runs) }
+        });
+        Ok(rows.collect())
+    }
+
+    fn run_config(&self, group: Group) -> anyhow::Result<Row> {
+        Ok(self.run_groups(&[group])?.remove(0))
     }
 }
 
@@ -387,15 +437,16 @@ fn latency_cells(l: Option<Latencies>) -> String {
 fn table(rows: &[&Row], open: bool) -> String {
     let mut out = String::new();
     if open {
-        out.push_str("| workload | clients | offered /s | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+        out.push_str("| workload | clients | offered /s | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | sent late p99 µs | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     } else {
         out.push_str("| workload | clients | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---|\n");
     }
     for r in rows {
         let offered = r.rate.map_or(String::new(), |x| format!(" {x:.0} |"));
+        let late = if open { format!(" {} |", r.late.map_or("–".into(), |l| us(l.p99_us))) } else { String::new() };
         let _ = writeln!(
             out,
-            "| {} | {} |{offered} {:.0} | {} | {} |",
+            "| {} | {} |{offered} {:.0} | {} |{late} {} |",
             r.workload.name(),
             r.clients,
             r.throughput,
@@ -404,6 +455,14 @@ fn table(rows: &[&Row], open: bool) -> String {
         );
     }
     out
+}
+
+/// The 1-minute load average (other processes compete for the 2 cores).
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|s| s.split_whitespace().next().map(str::to_string))
+        .unwrap_or_else(|| "?".into())
 }
 
 /// Runs the benchmark, prints the report, writes the files.
@@ -437,14 +496,15 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
         floor_service: format!("bench-latency-{pid}/floor"),
         tmp: tmp.clone(),
     };
+    let load_before = load_average();
     let result = run_with_daemon(&b, &dyfosd);
     let left = shm_leftovers(&b.domain);
     let _ = std::fs::remove_dir_all(&tmp);
-    let (report, rows, shutdown) = result?;
-    let mut report = report;
+    let (mut report, rows, shutdown) = result?;
     let _ = writeln!(
         report,
-        "\nDaemon shutdown: {shutdown}; shared-memory files left in /dev/shm: {}.",
+        "\nLoad average (1 min) before and after the run: {load_before}, {}. Daemon shutdown: {shutdown}; shared-memory files left in /dev/shm: {}.",
+        load_average(),
         if left.is_empty() { "none".to_string() } else { left.join(", ") }
     );
     write_files(args, &report, &rows)?;
@@ -453,6 +513,14 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
 }
 
 type Outcome = (String, Vec<Row>, String);
+
+/// What the daemon itself measured (receipt to reply) over exactly one configuration.
+#[derive(Debug, Clone, Copy)]
+struct InDaemon {
+    queries: u64,
+    p50_us: u64,
+    p99_us: u64,
+}
 
 fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     let a = b.args;
@@ -476,6 +544,7 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     }
 
     let mut rows = Vec::new();
+    let mut in_daemon = None;
     for w in &a.workloads {
         match w {
             Workload::Floor => {
@@ -486,9 +555,9 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
                     std::thread::spawn(move || serve_floor(&domain, &service, max, &stop))
                 };
                 let mut run = || -> anyhow::Result<()> {
-                    rows.push(b.run_config(Workload::Floor, 1, None)?);
+                    rows.push(b.run_config(Group::closed(Workload::Floor, 1))?);
                     for r in &a.null_rates {
-                        rows.push(b.run_config(Workload::Floor, a.open_clients, Some(*r))?);
+                        rows.push(b.run_config(Group::open(Workload::Floor, a.open_clients, *r))?);
                     }
                     Ok(())
                 };
@@ -500,14 +569,32 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
             }
             Workload::Null | Workload::Dyfos => {
                 for n in &a.clients {
-                    rows.push(b.run_config(*w, *n, None)?);
+                    let before = client.stats(TIMEOUT)?.queries_served;
+                    rows.push(b.run_config(Group::closed(*w, *n))?);
+                    // The daemon's latency window covers only this run's queries when
+                    // they are all it served since `before` and no more than the window.
+                    let s = client.stats(TIMEOUT)?;
+                    if *w == Workload::Dyfos && *n == 1 && s.queries_served - before >= s.latency_samples {
+                        in_daemon = Some(InDaemon {
+                            queries: s.latency_samples,
+                            p50_us: s.latency_micros[0],
+                            p99_us: s.latency_micros[2],
+                        });
+                    }
                 }
                 let rates = if *w == Workload::Null { &a.null_rates } else { &a.dyfos_rates };
                 for r in rates {
-                    rows.push(b.run_config(*w, a.open_clients, Some(*r))?);
+                    rows.push(b.run_config(Group::open(*w, a.open_clients, *r))?);
                 }
             }
         }
+    }
+    let mixed = a.workloads.contains(&Workload::Null) && a.workloads.contains(&Workload::Dyfos);
+    if mixed && a.mixed_null_rate > 0.0 && a.mixed_dyfos_clients > 0 {
+        rows.extend(b.run_groups(&[
+            Group::open(Workload::Null, 1, a.mixed_null_rate),
+            Group::closed(Workload::Dyfos, a.mixed_dyfos_clients),
+        ])?);
     }
     let stats = client.stats(TIMEOUT)?;
     drop(client);
@@ -516,12 +603,12 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
         s => format!("NOT clean: {s}; log:\n{}", std::fs::read_to_string(&log).unwrap_or_default()),
     };
 
-    // In-process baselines, with the daemon gone (the machine is quiet).
+    // In-process baselines, with the daemon gone.
     eprintln!("latency: in-process baselines");
     let mut baselines = Vec::new();
     for w in [Workload::Null, Workload::Dyfos] {
         if a.workloads.contains(&w) {
-            baselines.push((w, Row::of(w, 1, None, vec![in_process(w, &set, duration)])));
+            baselines.push((w, Row::of(Group::closed(w, 1), vec![in_process(w, &set, duration)])));
         }
     }
 
@@ -535,34 +622,40 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
         workers,
         if a.daemon_args.is_empty() { String::new() } else { format!(" and `{}`", a.daemon_args.join(" ")) }
     );
-    let closed: Vec<&Row> = rows.iter().filter(|r| r.rate.is_none()).collect();
-    let open: Vec<&Row> = rows.iter().filter(|r| r.rate.is_some()).collect();
+    let alone = |r: &&Row| r.alongside.is_none();
+    let closed: Vec<&Row> = rows.iter().filter(alone).filter(|r| r.rate.is_none()).collect();
+    let open: Vec<&Row> = rows.iter().filter(alone).filter(|r| r.rate.is_some()).collect();
+    let together: Vec<&Row> = rows.iter().filter(|r| r.alongside.is_some()).collect();
     report.push_str("### Closed loop (each client sends its next request when the last is answered)\n\n");
     report.push_str(&table(&closed, false));
     if !open.is_empty() {
         report.push_str("\n### Open loop (Poisson arrivals; latency from the scheduled send time)\n\n");
         report.push_str(&table(&open, true));
     }
-    report.push_str(&comparison(&rows, &baselines));
+    if !together.is_empty() {
+        report.push_str("\n### Mixed: null queries while `dyfos` queries keep the workers busy (one run)\n\n");
+        let open_rows: Vec<&Row> = together.iter().copied().filter(|r| r.rate.is_some()).collect();
+        let closed_rows: Vec<&Row> = together.iter().copied().filter(|r| r.rate.is_none()).collect();
+        report.push_str(&table(&open_rows, true));
+        report.push('\n');
+        report.push_str(&table(&closed_rows, false));
+    }
+    report.push_str(&comparison(&rows, &baselines, in_daemon));
     let _ = writeln!(
         report,
-        "\nDaemon counters at the end: {} queries served, {} requests failed, latency in the daemon (receipt to reply, last {} queries) p50 {} µs, p99 {} µs.",
-        stats.queries_served,
-        stats.requests_failed,
-        stats.latency_samples,
-        stats.latency_micros[0],
-        stats.latency_micros[2]
+        "\nDaemon counters at the end: {} queries served, {} requests failed.",
+        stats.queries_served, stats.requests_failed,
     );
     rows.extend(baselines.into_iter().map(|(_, r)| Row { clients: 0, ..r }));
     Ok((report, rows, shutdown))
 }
 
 fn find(rows: &[Row], w: Workload, clients: usize) -> Option<&Row> {
-    rows.iter().find(|r| r.workload == w && r.clients == clients && r.rate.is_none())
+    rows.iter().find(|r| r.workload == w && r.clients == clients && r.rate.is_none() && r.alongside.is_none())
 }
 
 /// The floor, the in-process call and the daemon side by side, and the targets.
-fn comparison(rows: &[Row], baselines: &[(Workload, Row)]) -> String {
+fn comparison(rows: &[Row], baselines: &[(Workload, Row)], in_daemon: Option<InDaemon>) -> String {
     let mut out = String::from("\n### Daemon against the in-process call and the iceoryx2 floor (one client)\n\n");
     out.push_str("| path | p50 µs | p99 µs | p50 ratio to the daemon |\n|---|---:|---:|---:|\n");
     let base = |w| baselines.iter().find(|(b, _)| *b == w).map(|(_, r)| r);
@@ -585,19 +678,32 @@ fn comparison(rows: &[Row], baselines: &[(Workload, Row)]) -> String {
     line("daemon `dyfos` query", dyfos_l, dyfos_l);
     line("in-process `dyfos` query (`solve`, one thread)", base(Workload::Dyfos).and_then(|r| r.latency), dyfos_l);
     if let Some(d) = dyfos {
-        line("  of which search in the daemon", d.search, dyfos_l);
-        line("  of which outside the search (end-to-end − search)", d.overhead, dyfos_l);
+        line("– of which the search, as timed in the daemon", d.search, dyfos_l);
+        line("– of which the rest (end-to-end − search)", d.overhead, dyfos_l);
+    }
+    if let Some(d) = in_daemon {
+        let _ = writeln!(
+            out,
+            "| daemon `dyfos` query, receipt to reply inside dyfosd ({} queries) | {} | {} | {} |",
+            d.queries,
+            d.p50_us,
+            d.p99_us,
+            dyfos_l.map_or("–".into(), |l| format!("{:.3}", d.p50_us as f64 / l.p50_us))
+        );
     }
 
     out.push_str("\n### Targets (2 cores)\n\n| target | measured | met |\n|---|---|---|\n");
     let yes = |ok: bool| if ok { "yes" } else { "**no**" };
-    // Null query "while traffic flows": the open-loop null rows and the 1–2 client closed loops.
+    // Null query "while traffic flows": back to back, open loop, and beside dyfos load.
     for r in rows.iter().filter(|r| r.workload == Workload::Null && (r.rate.is_some() || r.clients <= 2)) {
         if let Some(l) = r.latency {
-            let what = match r.rate {
-                Some(x) => format!("open loop {x:.0}/s, {} clients", r.clients),
+            let mut what = match r.rate {
+                Some(x) => format!("open loop {x:.0}/s, {} client(s)", r.clients),
                 None => format!("closed loop, {} client(s)", r.clients),
             };
+            if let Some(o) = &r.alongside {
+                let _ = write!(what, ", beside {o}");
+            }
             let _ = writeln!(
                 out,
                 "| null query p50 ≤ 10 µs, p99 ≤ 50 µs ({what}) | p50 {} µs, p99 {} µs | {} |",
@@ -630,8 +736,9 @@ fn comparison(rows: &[Row], baselines: &[(Workload, Row)]) -> String {
     {
         let _ = writeln!(
             out,
-            "| … same, per query: end-to-end − search time, p50 | {} µs = {:.1} % of the search p50 | {} |",
+            "| … the same per query: (end-to-end − search) / search, p50s | {} µs / {} µs = {:.1} % | {} |",
             us(o.p50_us),
+            us(s.p50_us),
             o.p50_us / s.p50_us * 100.0,
             yes(o.p50_us / s.p50_us <= 0.05)
         );
@@ -670,12 +777,17 @@ fn write_files(args: &LatencyArgs, report: &str, rows: &[Row]) -> anyhow::Result
                 "overhead": l(r.overhead),
                 "errors": r.errors,
                 "unsent": r.unsent,
+                "sent_late": l(r.late),
+                "alongside": r.alongside,
             })
         })
         .collect();
     write("latency.json", &serde_json::to_string_pretty(&json)?)?;
     for w in [Workload::Null, Workload::Dyfos] {
-        let closed: Vec<&Row> = rows.iter().filter(|r| r.workload == w && r.rate.is_none() && r.clients > 0).collect();
+        let closed: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.workload == w && r.rate.is_none() && r.clients > 0 && r.alongside.is_none())
+            .collect();
         if closed.is_empty() {
             continue;
         }
@@ -717,7 +829,7 @@ fn write_files(args: &LatencyArgs, report: &str, rows: &[Row]) -> anyhow::Result
             name: format!("{} queries/s", w.name()),
             points: rows
                 .iter()
-                .filter(|r| r.workload == *w && r.rate.is_none() && r.clients > 0)
+                .filter(|r| r.workload == *w && r.rate.is_none() && r.clients > 0 && r.alongside.is_none())
                 .map(|r| (r.clients as f64, r.throughput))
                 .collect(),
         })
