@@ -72,7 +72,13 @@ pub fn run(args: &LearnedArgs) -> anyhow::Result<()> {
         ("paper".into(), NoiseModel::Paper(Paper)),
         ("anisotropic".into(), NoiseModel::Anisotropic(Anisotropic { lambda: params.lambda })),
     ];
-    let mut report = format!("Model: `{}` — {}\n\n", args.model.display(), weights.note());
+    let load = || std::fs::read_to_string("/proc/loadavg").map(|l| l.split(' ').take(3).collect::<Vec<_>>().join(" "));
+    let mut report = format!(
+        "Model: `{}` — {}\n\nLoad average at start: {}\n\n",
+        args.model.display(),
+        weights.note(),
+        load().unwrap_or_else(|_| "unknown".into())
+    );
 
     // Held-out NLL and std fit.
     let data = generate(&DataSpec { samples: args.samples, seed: args.data_seed, ..DataSpec::default() });
@@ -177,10 +183,15 @@ pub fn run(args: &LearnedArgs) -> anyhow::Result<()> {
 
     // Cost of one noise prediction.
     let features: Vec<_> = data.samples.iter().take(20_000).map(|s| s.features).collect();
-    let _ = writeln!(report, "\n### One `noise` call (median of 9 passes over {} features)\n", features.len());
+    let _ = writeln!(
+        report,
+        "\n### One `noise` call (median over batches of 256 calls, 9 passes over {} held-out features)\n",
+        features.len()
+    );
     for (name, model) in &models {
         let _ = writeln!(report, "- {name}: {:.1} ns", noise_nanos(model, &features, 9));
     }
+    let _ = writeln!(report, "\nLoad average at the end: {}", load().unwrap_or_else(|_| "unknown".into()));
     print!("{report}");
     write(&args.out, "learned.md", &report)
 }
