@@ -21,6 +21,7 @@
 //! from the one reported, counts as infeasible.
 
 use crate::stats::Summary;
+use cpu_time::ProcessTime;
 use dyfos_service::lupp::Lupp;
 use dyfos_service::search::{AnySearch, Search, SearchControl, SearchOutcome};
 use dyfos_shared::answer::{Algorithm, EvalStats, StopReason};
@@ -63,6 +64,10 @@ pub struct Query {
     pub repeatable: bool,
     /// Median wall time of the repeats, s.
     pub seconds: f64,
+    /// Median CPU time of the repeats, s, summed over the search's threads (`NaN`
+    /// where the platform does not report it). On a shared, busy machine this is
+    /// the steadier figure: wall time on idle cores ≈ CPU time / threads.
+    pub cpu_seconds: f64,
     /// Candidates evaluated.
     pub evaluations: EvalStats,
     /// Why the search stopped.
@@ -92,16 +97,22 @@ pub fn query_seed(seed: u64, index: usize) -> u64 {
     seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(index as u64)
 }
 
+/// One search: outcome, wall time and CPU time (s).
 fn run_once(
     search: &AnySearch,
     scenario: &Scenario,
     model: &NoiseModel,
     control: &SearchControl,
-) -> (SearchOutcome, f64) {
+) -> (SearchOutcome, f64, f64) {
+    // The process clock sums every thread, `brute`'s workers included (the
+    // benchmark runs nothing else meanwhile).
+    let cpu = ProcessTime::try_now().ok();
     let started = Instant::now();
     let lupp = Lupp::new(&scenario.world, &scenario.belief, &scenario.params, model);
     let outcome = search.search(&lupp, control);
-    (outcome, started.elapsed().as_secs_f64())
+    let wall = started.elapsed().as_secs_f64();
+    let cpu_time = cpu.and_then(|c| c.try_elapsed().ok()).map_or(f64::NAN, |d| d.as_secs_f64());
+    (outcome, wall, cpu_time)
 }
 
 fn bits(o: &SearchOutcome) -> Option<([u64; 4], u64)> {
@@ -136,13 +147,16 @@ pub fn evaluate_with(
         for (c, contender) in contenders.iter().enumerate() {
             let control = SearchControl { threads: contender.threads, ..SearchControl::seeded(query_seed(seed, m)) };
             let mut times = Vec::with_capacity(repeats.max(1));
-            let (first, t) = run_once(&contender.search, scenario, &model, &control);
+            let mut cpu_times = Vec::with_capacity(repeats.max(1));
+            let (first, t, cpu) = run_once(&contender.search, scenario, &model, &control);
             times.push(t);
+            cpu_times.push(cpu);
             let mut repeatable = true;
             for _ in 1..repeats.max(1) {
-                let (again, t) = run_once(&contender.search, scenario, &model, &control);
+                let (again, t, cpu) = run_once(&contender.search, scenario, &model, &control);
                 repeatable &= bits(&again) == bits(&first) && again.stats == first.stats;
                 times.push(t);
+                cpu_times.push(cpu);
             }
             let verified = first.best.is_some_and(|b| {
                 let lupp = Lupp::new(&scenario.world, &scenario.belief, &scenario.params, &model);
@@ -154,6 +168,11 @@ pub fn evaluate_with(
                 verified,
                 repeatable,
                 seconds: Summary::of(&times).expect("at least one run").median,
+                cpu_seconds: if cpu_times.iter().all(|c| c.is_finite()) {
+                    Summary::of(&cpu_times).expect("at least one run").median
+                } else {
+                    f64::NAN
+                },
                 evaluations: first.stats,
                 stop: first.stop,
             });
@@ -224,22 +243,24 @@ impl Evaluation {
     /// Markdown table of run time per contender (median ± std, max) and evaluations.
     pub fn time_table(&self) -> String {
         let mut out = String::from(
-            "| algorithm | threads | time median | ± std | max | evaluations median | core-µs per evaluation (median) |\n|---|---:|---:|---:|---:|---:|---:|\n",
+            "| algorithm | threads | time median | ± std | max | CPU time median | evaluations median | CPU-µs per evaluation (median) |\n|---|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         for (c, name) in self.names.iter().enumerate() {
             let q = &self.queries[c];
             let secs: Vec<f64> = q.iter().map(|q| q.seconds).collect();
             let evals: Vec<f64> = q.iter().map(|q| q.evaluations.total as f64).collect();
+            let cpu: Vec<f64> = q.iter().map(|q| q.cpu_seconds).filter(|c| c.is_finite()).collect();
             let per: Vec<f64> = q
                 .iter()
-                .filter(|q| q.evaluations.total > 0)
-                .map(|q| q.seconds * 1e6 * self.threads[c] as f64 / q.evaluations.total as f64)
+                .filter(|q| q.evaluations.total > 0 && q.cpu_seconds.is_finite())
+                .map(|q| q.cpu_seconds * 1e6 / q.evaluations.total as f64)
                 .collect();
             let (Some(t), Some(e)) = (Summary::of(&secs), Summary::of(&evals)) else { continue };
             let per = Summary::of(&per).map_or("–".to_string(), |p| format!("{:.3}", p.median));
+            let cpu = Summary::of(&cpu).map_or("–".to_string(), |c| duration(c.median));
             let _ = writeln!(
                 out,
-                "| {name} | {} | {} | {} | {} | {:.0} | {per} |",
+                "| {name} | {} | {} | {} | {} | {cpu} | {:.0} | {per} |",
                 self.threads[c],
                 duration(t.median),
                 duration(t.std),
@@ -294,6 +315,7 @@ mod tests {
             verified: true,
             repeatable: true,
             seconds: 1e-3,
+            cpu_seconds: 1e-3,
             evaluations: EvalStats::default(),
             stop: StopReason::Finished,
         };

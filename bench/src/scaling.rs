@@ -44,7 +44,9 @@ pub struct ScalingRow {
     pub occupied_cells: Option<usize>,
     /// Per-query wall time over the maps, s; `None` when the map could not be built.
     pub seconds: Option<Summary>,
-    /// Per-query µs per evaluated candidate, median over the maps.
+    /// Per-query CPU time, s, median over the maps.
+    pub cpu_seconds: Option<f64>,
+    /// Per-query CPU-µs per evaluated candidate, median over the maps.
     pub micros_per_evaluation: Option<f64>,
     /// Candidates per query, median.
     pub evaluations: Option<f64>,
@@ -84,6 +86,7 @@ pub fn obstacle_scaling(
                     kind,
                     occupied_cells: None,
                     seconds: None,
+                    cpu_seconds: None,
                     micros_per_evaluation: None,
                     evaluations: None,
                     feasible: 0,
@@ -107,8 +110,12 @@ fn row(
     let run = evaluate(scenarios, contender, seed, 3);
     let q = &run.queries[0];
     let secs: Vec<f64> = q.iter().map(|q| q.seconds).collect();
-    let per: Vec<f64> =
-        q.iter().filter(|q| q.evaluations.total > 0).map(|q| q.seconds * 1e6 / q.evaluations.total as f64).collect();
+    let cpu: Vec<f64> = q.iter().map(|q| q.cpu_seconds).filter(|c| c.is_finite()).collect();
+    let per: Vec<f64> = q
+        .iter()
+        .filter(|q| q.evaluations.total > 0 && q.cpu_seconds.is_finite())
+        .map(|q| q.cpu_seconds * 1e6 / q.evaluations.total as f64)
+        .collect();
     let evals: Vec<f64> = q.iter().map(|q| q.evaluations.total as f64).collect();
     ScalingRow {
         obstacles: n,
@@ -116,6 +123,7 @@ fn row(
         kind,
         occupied_cells,
         seconds: Summary::of(&secs),
+        cpu_seconds: Summary::of(&cpu).map(|s| s.median),
         micros_per_evaluation: Summary::of(&per).map(|s| s.median),
         evaluations: Summary::of(&evals).map(|s| s.median),
         feasible: q.iter().filter(|q| q.feasible()).count(),
@@ -126,7 +134,7 @@ fn row(
 /// The rows as a markdown table.
 pub fn scaling_table(rows: &[ScalingRow]) -> String {
     let mut out = String::from(
-        "| cylinders | map | obstacles as | occupied cells | time median | ± std | max | evaluations median | µs per evaluation | feasible |\n|---:|---|---|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| cylinders | map | obstacles as | occupied cells | time median | ± std | max | CPU time median | evaluations median | CPU-µs per evaluation | feasible |\n|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         let side = format!("{0:.0} × {0:.0} m", 2.0 * r.half_width);
@@ -139,11 +147,12 @@ pub fn scaling_table(rows: &[ScalingRow]) -> String {
             (Some(s), _) => {
                 let _ = writeln!(
                     out,
-                    "| {} | {side} | {kind} | {cells} | {} | {} | {} | {:.0} | {:.3} | {}/{} |",
+                    "| {} | {side} | {kind} | {cells} | {} | {} | {} | {} | {:.0} | {:.3} | {}/{} |",
                     r.obstacles,
                     duration(s.median),
                     duration(s.std),
                     duration(s.max),
+                    r.cpu_seconds.map_or("–".into(), duration),
                     r.evaluations.unwrap_or(f64::NAN),
                     r.micros_per_evaluation.unwrap_or(f64::NAN),
                     r.feasible,
@@ -152,7 +161,7 @@ pub fn scaling_table(rows: &[ScalingRow]) -> String {
             }
             (None, why) => {
                 let why = why.as_deref().unwrap_or("no maps");
-                let _ = writeln!(out, "| {} | {side} | {kind} | {cells} | skipped: {why} | | | | | |", r.obstacles);
+                let _ = writeln!(out, "| {} | {side} | {kind} | {cells} | skipped: {why} | | | | | | |", r.obstacles);
             }
         }
     }

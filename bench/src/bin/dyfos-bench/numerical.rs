@@ -291,6 +291,7 @@ fn raw_json(run: &Evaluation, args: &NumericalArgs) -> String {
                         "verified": q.verified,
                         "repeatable": q.repeatable,
                         "seconds": q.seconds,
+                        "cpu_seconds": if q.cpu_seconds.is_finite() { Some(q.cpu_seconds) } else { None },
                         "evaluations": q.evaluations,
                         "stop": q.stop,
                     })
