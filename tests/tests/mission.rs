@@ -270,3 +270,24 @@ fn the_example_mission_file_runs_in_the_demo_format() {
     assert_eq!(mission.odometry.trans_per_m, dyfos_client::sim::OdometryNoise::default().trans_per_m);
     assert_eq!(mission.sun_azimuth_rate, 0.01);
 }
+
+#[test]
+fn a_killed_rover_lets_the_viewer_leave() {
+    let sandbox = Sandbox::new("mission-rover-kill");
+    let _daemon = sandbox.start_daemon(&[]);
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let mut recorder = files.recorder("m");
+    let mut viewer = files.viewer("m", "dyfos", 4, &[]);
+    let mut rover = files.rover("m", 4, "10", &[]);
+    let start = Instant::now();
+    while recorder.trace().updates() == 0 {
+        assert!(start.elapsed() < PATIENCE, "no first update:\n{}", rover.log());
+        recorder.wait(Duration::from_millis(20));
+        recorder.poll();
+    }
+    rover.kill9();
+    // Long before its 120 s idle timeout, the viewer notices the rover is gone.
+    let status = viewer.wait_exit();
+    assert_eq!(status.code(), Some(1), "{}", viewer.log());
+    assert!(viewer.log().contains("went away before reaching its goal"), "{}", viewer.log());
+}

@@ -135,6 +135,12 @@ pub enum ViewerRunError {
         /// How long the viewer waited.
         waited: Duration,
     },
+    /// The rover that was being served went away before finishing.
+    #[error("the rover on `{topic}` went away before reaching its goal")]
+    RoverGone {
+        /// The rendezvous topic.
+        topic: String,
+    },
     /// SIGINT or SIGTERM arrived.
     #[error("stopped by a signal")]
     Stopped,
@@ -160,6 +166,7 @@ struct Viewer<'a> {
     truth: Inbox<TrueStateMsg>,
     latest_truth: Option<TrueState>,
     log: EventLog,
+    topics: Topics,
 }
 
 impl Viewer<'_> {
@@ -259,6 +266,7 @@ impl Viewer<'_> {
     /// Waits for the rover to stand at waypoint `step`; its true pose, or why not.
     fn rover_at(&mut self, step: u32, stop: &impl Fn() -> bool) -> Result<[f64; 3], NoMeasurement> {
         let start = Instant::now();
+        let mut checked = start;
         loop {
             self.drain_truth();
             match self.latest_truth {
@@ -269,7 +277,15 @@ impl Viewer<'_> {
             if start.elapsed() >= self.config.observe_timeout || stop() {
                 return Err(NoMeasurement::RoverLeft);
             }
-            self.truth.wait(self.config.observe_timeout.saturating_sub(start.elapsed()));
+            // A rover that died on the way will not arrive: look once a second.
+            if checked.elapsed() >= Duration::from_secs(1) {
+                checked = Instant::now();
+                self.topics.cleanup_dead_nodes();
+                if self.truth.writers() == 0 {
+                    return Err(NoMeasurement::RoverLeft);
+                }
+            }
+            self.truth.wait(self.config.observe_timeout.saturating_sub(start.elapsed()).min(Duration::from_secs(1)));
         }
     }
 }
@@ -294,16 +310,18 @@ pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<Vie
         truth,
         latest_truth: None,
         log,
+        topics,
     };
     v.sync_map()?;
     // Listening on the rendezvous topic is what tells the rover a viewer is ready,
     // so it comes last.
-    let rendezvous = topics.inbox::<RendezvousStateMsg>(MISSION, RENDEZVOUS_TOPIC, 64)?;
+    let rendezvous = v.topics.inbox::<RendezvousStateMsg>(MISSION, RENDEZVOUS_TOPIC, 64)?;
     tracing::info!(algorithm = %config.algorithm, map = config.map_id, "viewer ready");
     v.log.record("ready", 0.0, json!({"algorithm": config.algorithm.name(), "map": config.map_id}));
 
     let mut report = ViewerReport { rendezvous: 0, observed: 0 };
     let mut heard = Instant::now();
+    let mut checked = Instant::now();
     loop {
         if stop() {
             return Err(ViewerRunError::Stopped);
@@ -311,6 +329,14 @@ pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<Vie
         let Some(msg) = rendezvous.recv_timeout(Duration::from_millis(200), stop) else {
             if heard.elapsed() > config.idle_timeout {
                 return Err(ViewerRunError::Idle { topic: rendezvous.name().to_string(), waited: config.idle_timeout });
+            }
+            // A rover that was here and is gone (crashed, killed) will not finish.
+            if report.rendezvous > 0 && checked.elapsed() > Duration::from_secs(1) {
+                checked = Instant::now();
+                v.topics.cleanup_dead_nodes();
+                if rendezvous.writers() == 0 {
+                    return Err(ViewerRunError::RoverGone { topic: rendezvous.name().to_string() });
+                }
             }
             continue;
         };
