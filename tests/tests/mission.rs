@@ -291,3 +291,25 @@ fn a_killed_rover_lets_the_viewer_leave() {
     assert_eq!(status.code(), Some(1), "{}", viewer.log());
     assert!(viewer.log().contains("went away before reaching its goal"), "{}", viewer.log());
 }
+
+#[test]
+fn a_mission_with_the_learned_noise_model_runs_end_to_end() {
+    let model = dyfos_tests::data("learned/model.bin");
+    let sandbox = Sandbox::new("mission-learned");
+    let _daemon = sandbox.start_daemon(&["--model", model.to_str().unwrap()]);
+    let mut mission = small_mission();
+    mission.params.model = dyfos_shared::params::ModelKind::Learned;
+    let files = MissionFiles::new(&sandbox, &mission);
+    let recorder = files.recorder("m");
+    let mut viewer = files.viewer("m", "dyfos", 2, &["--model", model.to_str().unwrap()]);
+    let mut rover = files.rover("m", 2, "0", &[]);
+    let (status, trace) = record_until_exit(recorder, &mut rover);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    assert!(trace.finished());
+    assert!(trace.updates() >= 3, "only {} updates:\n{}", trace.updates(), viewer.log());
+    // Without the weights the viewer refuses to start, naming the problem.
+    let out = Command::new(bin("dyfos-viewer")).arg("--mission").arg(&files.mission).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--model FILE"), "{}", String::from_utf8_lossy(&out.stderr));
+}

@@ -13,8 +13,11 @@ use dyfos_client::mission::topics::TopicsConfig;
 use dyfos_client::shutdown;
 use dyfos_client::viewer::{ViewerConfig, run_viewer};
 use dyfos_shared::answer::Algorithm;
+use dyfos_shared::params::ModelKind;
+use dyfos_shared::sdsmm::Learned;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// A simulated viewer: finds the optimal sensor pose with dyfosd, flies there and
@@ -64,6 +67,10 @@ struct Cli {
     /// Write every event as a JSON line to this file.
     #[arg(long)]
     events: Option<PathBuf>,
+    /// Model file of the learned SDSMM (from `dyfos train`), for missions with
+    /// `"model": "learned"`; give dyfosd the same file.
+    #[arg(long)]
+    model: Option<PathBuf>,
 }
 
 fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
@@ -90,7 +97,19 @@ fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
         connect_timeout: seconds("connect-timeout", cli.connect_timeout)?,
         ..ClientConfig::default()
     };
+    let learned = match &cli.model {
+        None if mission.params.model == ModelKind::Learned => anyhow::bail!(
+            "the mission uses the learned SDSMM (`\"model\": \"learned\"`); pass its weights with --model FILE, the same file as dyfosd's"
+        ),
+        None => None,
+        Some(path) => {
+            let bytes = std::fs::read(path).with_context(|| format!("cannot read model file {}", path.display()))?;
+            let model = Learned::from_bytes(&bytes).with_context(|| format!("{}", path.display()))?;
+            Some(Arc::new(model))
+        }
+    };
     Ok(ViewerConfig {
+        learned,
         map_id: cli.map_id,
         time_scale: (cli.time_scale > 0.0).then_some(cli.time_scale),
         query_timeout: seconds("query-timeout", cli.query_timeout)?,

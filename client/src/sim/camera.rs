@@ -92,7 +92,7 @@ impl SimCamera {
         if world.any_contact(&sight) {
             return CameraView::Occluded;
         }
-        let features = Features::new(p, &world.sun().direction(), &pose, &centre);
+        let features = Features::new(p, &world.sun().direction(), &pose, &centre).with_rover_heading(rover[2]);
         let r = self.model.noise(&features);
         let position = match r.matrix().cholesky() {
             Some(ch) => {

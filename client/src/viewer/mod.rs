@@ -38,7 +38,7 @@ use crate::sim::{CameraView, Flight, FlightLimits, SimCamera, SimClock, stream_s
 use crate::{Client, ClientConfig, ClientOpenError, MapRequestError, RendezvousError, RendezvousRequest, Status};
 use dyfos_shared::answer::{Algorithm, Answer};
 use dyfos_shared::posterior::Belief;
-use dyfos_shared::sdsmm::{NoiseModel, NoiseModelError};
+use dyfos_shared::sdsmm::{Learned, NoiseModel, NoiseModelError};
 use dyfos_shared::wire::map::MapId;
 use dyfos_shared::wire::mission::{
     MEASUREMENT_TOPIC, Measurement, MeasurementMsg, NoMeasurement, Observation, Phase, RENDEZVOUS_TOPIC,
@@ -49,6 +49,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// How the viewer runs.
@@ -80,6 +81,9 @@ pub struct ViewerConfig {
     pub idle_timeout: Duration,
     /// JSON-lines event log.
     pub events: Option<PathBuf>,
+    /// Weights of the `learned` SDSMM, for missions whose `params.model` is
+    /// `learned` (the camera's noise; `dyfosd` needs the same file, its `--model`).
+    pub learned: Option<Arc<Learned>>,
 }
 
 impl ViewerConfig {
@@ -100,6 +104,7 @@ impl ViewerConfig {
             observe_timeout: Duration::from_secs(10),
             idle_timeout: Duration::from_secs(120),
             events: None,
+            learned: None,
         }
     }
 }
@@ -293,7 +298,7 @@ impl Viewer<'_> {
 /// Runs until the rover finishes (or goes quiet for `idle_timeout`).
 pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<ViewerReport, ViewerRunError> {
     let mission = &config.mission;
-    let model = NoiseModel::from_params(&mission.params)?;
+    let model = NoiseModel::from_params_and_weights(&mission.params, config.learned.as_ref())?;
     let client = Client::connect(&config.client)?;
     let topics = Topics::open(&config.topics)?;
     let truth = topics.inbox::<TrueStateMsg>(SIM, TRUTH_TOPIC, 64)?;

@@ -15,6 +15,7 @@ use dyfos_client::mission::Mission;
 use dyfos_client::mission::topics::TopicsConfig;
 use dyfos_client::{Client, ClientConfig, shutdown};
 use dyfos_shared::answer::Algorithm;
+use dyfos_shared::params::ModelKind;
 use dyfos_shared::wire::mission::Observation;
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
@@ -46,6 +47,10 @@ pub struct DemoArgs {
     /// Skip the dead-reckoning baseline (a rover without a viewer).
     #[arg(long)]
     pub no_baseline: bool,
+    /// Model file of the learned SDSMM, for missions with `"model": "learned"`
+    /// (given to dyfosd and to each viewer).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
 }
 
 /// One configuration of the table: an algorithm or the baseline.
@@ -164,6 +169,7 @@ struct Demo<'a> {
     prefix: String,
     logs: PathBuf,
     mission_arg: Option<PathBuf>,
+    model_arg: Option<PathBuf>,
     waypoints: usize,
     interactive: bool,
 }
@@ -191,6 +197,9 @@ impl Demo<'_> {
             Arm::Viewer(algo) => {
                 let mut cmd = Command::new(&self.bins.viewer);
                 common(&mut cmd);
+                if let Some(m) = &self.model_arg {
+                    cmd.arg("--model").arg(m);
+                }
                 cmd.args(["--algo", algo.name(), "--map-id", &(index + 1).to_string()])
                     .arg("--events")
                     .arg(self.logs.join(format!("{name}-viewer.jsonl")));
@@ -234,10 +243,7 @@ impl Demo<'_> {
                 && v.exited() == Some(false)
                 && !recorder.trace().finished()
             {
-                tracing::warn!(
-                    "dyfos-viewer exited early; see {}",
-                    self.logs.join(format!("{name}-viewer.log")).display()
-                );
+                bail!("dyfos-viewer ({name}) failed:\n{}", tail(&self.logs.join(format!("{name}-viewer.log"))));
             }
             recorder.wait(Duration::from_millis(100));
         };
@@ -245,13 +251,7 @@ impl Demo<'_> {
             eprint!("\r{:80}\r", "");
         }
         if !ok {
-            let log = std::fs::read_to_string(&rover_log).unwrap_or_default();
-            let tail: Vec<&str> = log.lines().rev().take(5).collect();
-            bail!(
-                "dyfos-rover ({name}) failed; its log is {}:\n{}",
-                rover_log.display(),
-                tail.into_iter().rev().collect::<Vec<_>>().join("\n")
-            );
+            bail!("dyfos-rover ({name}) failed:\n{}", tail(&rover_log));
         }
         if let Some(v) = viewer.as_mut() {
             // The viewer leaves when the rover says it finished.
@@ -277,9 +277,19 @@ impl Demo<'_> {
     }
 }
 
-fn start_daemon(bins: &Binaries, prefix: &str, state: &Path, log: &Path) -> anyhow::Result<Proc> {
+/// The last lines of a log, and where the rest is.
+fn tail(log: &Path) -> String {
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    let last: Vec<&str> = text.lines().rev().take(5).collect();
+    format!("{}\n(whole log: {})", last.into_iter().rev().collect::<Vec<_>>().join("\n"), log.display())
+}
+
+fn start_daemon(bins: &Binaries, prefix: &str, state: &Path, model: Option<&Path>, log: &Path) -> anyhow::Result<Proc> {
     let mut cmd = Command::new(&bins.dyfosd);
     cmd.args(["--prefix", prefix]).arg("--state-dir").arg(state);
+    if let Some(m) = model {
+        cmd.arg("--model").arg(m);
+    }
     cmd.env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()));
     let mut daemon = Proc::spawn("dyfosd", &mut cmd, log)?;
     let config = ClientConfig {
@@ -369,6 +379,11 @@ fn run(args: &DemoArgs) -> Result<(), Failure> {
         return Err(Failure::invalid(anyhow!("give at least one seed and one algorithm")));
     }
     let mission = Mission::load(args.mission.as_deref()).map_err(Failure::invalid)?;
+    if mission.params.model == ModelKind::Learned && args.model.is_none() {
+        return Err(Failure::invalid(anyhow!(
+            "the mission uses the learned SDSMM (`\"model\": \"learned\"`); pass its weights with --model FILE (e.g. tests/data/learned/model.bin)"
+        )));
+    }
     let bins = Binaries::locate()?;
     shutdown::install();
     let logs = args.out.join("logs");
@@ -393,13 +408,15 @@ fn run(args: &DemoArgs) -> Result<(), Failure> {
         logs.display()
     );
     let started = Instant::now();
-    let mut daemon = start_daemon(&bins, &prefix, &state, &logs.join("dyfosd.log"))?;
+    let model_arg = args.model.as_ref().map(|p| std::path::absolute(p).unwrap_or_else(|_| p.clone()));
+    let mut daemon = start_daemon(&bins, &prefix, &state, model_arg.as_deref(), &logs.join("dyfosd.log"))?;
     let demo = Demo {
         args,
         bins,
         prefix,
         logs: logs.clone(),
         mission_arg: args.mission.as_ref().map(|p| std::path::absolute(p).unwrap_or_else(|_| p.clone())),
+        model_arg: model_arg.clone(),
         waypoints: mission.waypoints.len(),
         interactive: std::io::stderr().is_terminal(),
     };
