@@ -85,7 +85,7 @@ pub struct Mission {
 
 /// A mission file that cannot be used.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum MissionError {
+pub enum MissionParseError {
     /// Not JSON or not of the mission's shape.
     #[error("{path}{message}")]
     Malformed {
@@ -202,15 +202,15 @@ impl Mission {
     }
 
     /// Reads and validates a mission document (format in the module docs).
-    pub fn from_json(json: &str) -> Result<Self, MissionError> {
+    pub fn from_json(json: &str) -> Result<Self, MissionParseError> {
         let de = &mut serde_json::Deserializer::from_str(json);
         let raw: RawMission = serde_path_to_error::deserialize(de).map_err(|e| {
             let path = e.path().to_string();
             let path = if path.is_empty() || path == "." { String::new() } else { format!("{path}: ") };
-            MissionError::Malformed { path, message: e.into_inner().to_string() }
+            MissionParseError::Malformed { path, message: e.into_inner().to_string() }
         })?;
-        let scenario = Scenario::from_json(&raw.scenario.to_string()).map_err(MissionError::Scenario)?;
-        let invalid = |path: String, message: String| MissionError::Invalid { path, message };
+        let scenario = Scenario::from_json(&raw.scenario.to_string()).map_err(MissionParseError::Scenario)?;
+        let invalid = |path: String, message: String| MissionParseError::Invalid { path, message };
         if raw.waypoints.is_empty() || raw.waypoints.len() > MAX_WAYPOINTS {
             return Err(invalid(
                 "waypoints".into(),
@@ -323,7 +323,7 @@ pub enum MissionLoadError {
         path: String,
         /// What is wrong.
         #[source]
-        source: MissionError,
+        source: MissionParseError,
     },
 }
 
