@@ -6,11 +6,11 @@
 //! use dyfos_service::search::{AnySearch, Brute};
 //!
 //! let coarse = AnySearch::Brute(Brute { grid: [3, 3, 3, 8] });
-//! let rows = obstacle_scaling(&[25, 100], 2, 1, &coarse, Some(0.1));
+//! let rows = obstacle_scaling(&[25, 100], 1, 1, &coarse, Some(0.5));
 //! assert_eq!(rows.len(), 4);
-//! assert_eq!((rows[0].kind, rows[0].obstacles), (MapKind::Cylinders, 25));
-//! assert_eq!(rows[1].kind, MapKind::Voxels { resolution: 0.1 });
-//! assert!(rows[1].occupied_cells.unwrap() > 100_000);
+//! assert_eq!((rows[0].kind, rows[0].obstacles, rows[0].half_width), (MapKind::Cylinders, 25, 10.0));
+//! assert_eq!((rows[3].kind, rows[3].half_width), (MapKind::Voxels { resolution: 0.5 }, 20.0));
+//! assert!(rows[3].occupied_cells.unwrap() > 10_000);
 //! ```
 
 use crate::evaluation::{Contender, duration, evaluate};
