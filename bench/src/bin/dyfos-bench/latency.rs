@@ -65,6 +65,11 @@ pub struct LatencyArgs {
     /// Mixed run: `dyfos` clients keeping the workers busy.
     #[arg(long, default_value_t = 4)]
     mixed_dyfos_clients: usize,
+    /// Before/after: also run the one-client closed loops, the first null rate in
+    /// open loop and the mixed run against a second daemon started with these extra
+    /// flags (e.g. `--compare-daemon-arg=--worker-nice=10`), in the same run.
+    #[arg(long = "compare-daemon-arg", value_name = "FLAG", allow_hyphen_values = true)]
+    compare_daemon_args: Vec<String>,
     /// Directory for the table (markdown), summary (JSON) and plots (SVG).
     #[arg(long, default_value = "bench/out")]
     out: PathBuf,
@@ -371,12 +376,13 @@ impl Bench<'_> {
 }
 
 /// Starts `dyfosd` for the bench and waits until it serves.
-fn start_daemon(b: &Bench, dyfosd: &Path, state: &Path, log: &Path) -> anyhow::Result<Guard> {
+fn start_daemon(b: &Bench, dyfosd: &Path, extra: &[String], state: &Path, log: &Path) -> anyhow::Result<Guard> {
     let log_file = std::fs::File::create(log).with_context(|| format!("cannot create {}", log.display()))?;
     let child = Command::new(dyfosd)
         .args(["--prefix", &b.prefix, "--domain", &b.domain, "--state-dir"])
         .arg(state)
         .args(&b.args.daemon_args)
+        .args(extra)
         .env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into()))
         .stdin(Stdio::null())
         .stdout(Stdio::null())
@@ -497,7 +503,13 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
         tmp: tmp.clone(),
     };
     let load_before = load_average();
-    let result = run_with_daemon(&b, &dyfosd);
+    let result = run_with_daemon(&b, &dyfosd).and_then(|(mut report, rows, shutdown)| {
+        if !args.compare_daemon_args.is_empty() {
+            let baseline = run_baseline(&b, &dyfosd)?;
+            report.push_str(&before_after(&rows, &baseline, &args.compare_daemon_args));
+        }
+        Ok((report, rows, shutdown))
+    });
     let left = shm_leftovers(&b.domain);
     let _ = std::fs::remove_dir_all(&tmp);
     let (mut report, rows, shutdown) = result?;
@@ -528,7 +540,7 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     let duration = Duration::from_secs_f64(a.seconds);
     let state = b.tmp.join("state");
     let log = b.tmp.join("dyfosd.log");
-    let mut daemon = start_daemon(b, dyfosd, &state, &log)?;
+    let mut daemon = start_daemon(b, dyfosd, &[], &state, &log)?;
     let config = ClientConfig {
         prefix: b.prefix.clone(),
         domain: Some(b.domain.clone()),
@@ -648,6 +660,78 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     );
     rows.extend(baselines.into_iter().map(|(_, r)| Row { clients: 0, ..r }));
     Ok((report, rows, shutdown))
+}
+
+/// The configurations of the before/after comparison.
+fn baseline_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
+    let mut configs = vec![vec![Group::closed(Workload::Dyfos, 1)], vec![Group::closed(Workload::Null, 1)]];
+    if let Some(r) = a.null_rates.first() {
+        configs.push(vec![Group::open(Workload::Null, a.open_clients, *r)]);
+    }
+    if a.mixed_null_rate > 0.0 && a.mixed_dyfos_clients > 0 {
+        configs.push(vec![
+            Group::open(Workload::Null, 1, a.mixed_null_rate),
+            Group::closed(Workload::Dyfos, a.mixed_dyfos_clients),
+        ]);
+    }
+    configs
+}
+
+/// Runs [`baseline_groups`] against a daemon started with `--compare-daemon-arg`s.
+fn run_baseline(b: &Bench, dyfosd: &Path) -> anyhow::Result<Vec<Row>> {
+    let a = b.args;
+    let set = RequestSet::new(a.seed, a.maps);
+    let state = b.tmp.join("state-baseline");
+    let log = b.tmp.join("dyfosd-baseline.log");
+    eprintln!("latency: second daemon with {}", a.compare_daemon_args.join(" "));
+    let mut daemon = start_daemon(b, dyfosd, &a.compare_daemon_args, &state, &log)?;
+    let config = ClientConfig {
+        prefix: b.prefix.clone(),
+        domain: Some(b.domain.clone()),
+        connect_timeout: TIMEOUT,
+        ..ClientConfig::default()
+    };
+    let mut client = Client::connect(&config).with_context(|| {
+        format!("second dyfosd did not start; its log:\n{}", std::fs::read_to_string(&log).unwrap_or_default())
+    })?;
+    for (i, s) in set.scenarios.iter().enumerate() {
+        client.upload_map(map_id(i), &s.world, false, TIMEOUT).with_context(|| format!("uploading map {i}"))?;
+    }
+    drop(client);
+    let mut rows = Vec::new();
+    for groups in baseline_groups(a) {
+        rows.extend(b.run_groups(&groups)?);
+    }
+    let status = stop_daemon(&mut daemon)?;
+    if !status.success() {
+        bail!("the second dyfosd did not stop cleanly ({status})");
+    }
+    Ok(rows)
+}
+
+/// The same configurations with the first daemon (before) and the second (after).
+fn before_after(before: &[Row], after: &[Row], flags: &[String]) -> String {
+    let mut out = format!(
+        "\n### The same configurations, same run: dyfosd as above (before) and with `{}` (after)\n\n",
+        flags.join(" ")
+    );
+    out.push_str("| configuration | before: answered /s | p50 µs | p99 µs | after: answered /s | p50 µs | p99 µs |\n|---|---:|---:|---:|---:|---:|---:|\n");
+    let same = |x: &Row, y: &Row| {
+        x.workload == y.workload && x.clients == y.clients && x.rate == y.rate && x.alongside == y.alongside
+    };
+    let cells = |r: &Row| match r.latency {
+        Some(l) => format!("{:.0} | {} | {}", r.throughput, us(l.p50_us), us(l.p99_us)),
+        None => format!("{:.0} | – | –", r.throughput),
+    };
+    for a in after {
+        let Some(b) = before.iter().find(|b| same(a, b)) else { continue };
+        let mut what = Group { workload: b.workload, clients: b.clients, rate: b.rate }.label();
+        if let Some(o) = &b.alongside {
+            let _ = write!(what, ", beside {o}");
+        }
+        let _ = writeln!(out, "| {what} | {} | {} |", cells(b), cells(a));
+    }
+    out
 }
 
 fn find(rows: &[Row], w: Workload, clients: usize) -> Option<&Row> {
