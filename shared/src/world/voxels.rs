@@ -107,7 +107,8 @@ impl Dense {
 }
 
 fn check_index(index: &CellIndex) -> Result<(), VoxelError> {
-    if index.iter().all(|i| i.abs() <= MAX_VOXEL_INDEX) {
+    // `unsigned_abs`: a peer may send `i64::MIN`, whose `abs` overflows.
+    if index.iter().all(|i| i.unsigned_abs() <= MAX_VOXEL_INDEX.unsigned_abs()) {
         Ok(())
     } else {
         Err(VoxelError::IndexOutOfRange { index: *index })
@@ -210,10 +211,17 @@ impl VoxelGrid {
         // Axes along which the segment lies exactly on a cell boundary: there the
         // closed cells on both sides are touched.
         let mut twin = [false; 3];
+        // The walk never leaves the dense box (plus the layer of cells touching it):
+        // entry coordinates are clamped into it and the walk ends when it steps out.
+        // With cells far smaller than the float spacing of `t` (or of the entry
+        // point), rounding could otherwise start the walk far outside, or stall `t`
+        // while the cells advance forever.
+        let (box_lo, box_end) =
+            (self.dense.lo, std::array::from_fn::<i64, 3, _>(|a| self.dense.lo[a] + self.dense.dims[a]));
         for a in 0..3 {
             // Snap entry points within 1e-9 cells of a plane onto it, so rounding in
             // the clip does not decide whether a face or edge is touched.
-            let raw = g(t0, a);
+            let raw = g(t0, a).clamp((box_lo[a] - 1) as f64, box_end[a] as f64);
             let ga = if (raw - raw.round()).abs() < 1e-9 { raw.round() } else { raw };
             let fa = ga.floor();
             cell[a] = fa as i64;
@@ -245,6 +253,12 @@ impl VoxelGrid {
             // Every axis whose boundary is crossed at t_next steps together; the cells
             // reached by stepping any subset of them touch the segment at t_next.
             let tied = [t_max[0] == t_next, t_max[1] == t_next, t_max[2] == t_next];
+            // Stepping further out of the box reaches no cell that touches it.
+            if (0..3)
+                .any(|a| tied[a] && ((step[a] > 0 && cell[a] >= box_end[a]) || (step[a] < 0 && cell[a] < box_lo[a])))
+            {
+                return None;
+            }
             for a in 0..3 {
                 if tied[a] {
                     cell[a] += step[a];
@@ -373,5 +387,44 @@ mod tests {
             VoxelGrid::new(0.1, Point3::origin(), [[-MAX_VOXEL_INDEX, 0, 0], [MAX_VOXEL_INDEX, 1000, 1000]]),
             Err(VoxelError::GridTooLarge { .. })
         ));
+    }
+
+    /// Regression: `i64::MIN` from a peer overflowed `abs()` (a panic in the daemon).
+    #[test]
+    fn extreme_cell_indices_are_rejected_not_overflowed() {
+        for bad in [i64::MIN, i64::MIN + 1, i64::MAX, -MAX_VOXEL_INDEX - 1] {
+            assert!(
+                matches!(VoxelGrid::new(0.5, Point3::origin(), [[0, bad, 0]]), Err(VoxelError::IndexOutOfRange { .. })),
+                "{bad}"
+            );
+            let grid = VoxelGrid::new(0.5, Point3::origin(), [[0, 0, 0]]).unwrap();
+            assert!(grid.with_cells(&[[bad, 0, 0]], true).is_err(), "{bad}");
+        }
+        assert!(VoxelGrid::new(0.5, Point3::origin(), [[-MAX_VOXEL_INDEX, 0, 0]]).is_ok());
+    }
+
+    /// Regression: with cells far smaller than the float spacing of the ray
+    /// parameter, `t` stopped advancing and the walk never ended (a worker hung,
+    /// deadline or not); far from the origin the entry cell saturated and overflowed.
+    #[test]
+    fn voxel_walk_with_cells_below_float_spacing_terminates() {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut results = Vec::new();
+            for (resolution, origin) in [(1e-17, 5.0), (1e-300, 5.0), (1e-300, 1e6), (1e-12, -1e6), (1e6, 0.0)] {
+                let grid =
+                    VoxelGrid::new(resolution, Point3::new(origin, 0.0, 0.0), [[0, 100, 100], [100, 100, 0]]).unwrap();
+                for (y, z) in [(100.5, 50.5), (100.0, 0.0), (0.5, 0.5)] {
+                    let o = Point3::new(origin - 1.0, y * resolution, z * resolution);
+                    for d in [Vector3::x(), -Vector3::x(), Vector3::new(1.0, 1e-3, 1e-3).normalize()] {
+                        results.push(grid.first_contact(&Segment::closed(o, d, 10.0)));
+                    }
+                }
+            }
+            let _ = tx.send(results);
+        });
+        let results = rx.recv_timeout(std::time::Duration::from_secs(60)).expect("every walk ends");
+        assert_eq!(results.len(), 45);
+        assert!(results.iter().flatten().all(|t| (0.0..=10.0).contains(t)), "{results:?}");
     }
 }
