@@ -223,6 +223,11 @@ pub struct Client {
     config: ClientConfig,
     names: ServiceNames,
     conn: Option<Box<Connection>>,
+    /// The next request's id. Ids start at a random point, not at 1: iceoryx2 can
+    /// hand the connection of a client that died to a new client, and a reply the
+    /// daemon then sends for the dead client's request arrives at the new one. It
+    /// carries the dead client's id, which no other client uses, so it is dropped
+    /// like any reply that is not to the request waiting.
     next_id: u64,
 }
 
@@ -237,7 +242,8 @@ impl Client {
     /// `config.connect_timeout` for it to appear.
     pub fn connect(config: &ClientConfig) -> Result<Client, ClientOpenError> {
         let names = ServiceNames::new(&config.prefix)?;
-        let mut client = Client { config: config.clone(), names, conn: None, next_id: 1 };
+        let mut client =
+            Client { config: config.clone(), names, conn: None, next_id: unique_u64(0x7265_7175_6573_7473) };
         client.ensure_connected(config.connect_timeout)?;
         Ok(client)
     }
@@ -279,7 +285,7 @@ impl Client {
         call: impl FnOnce(&Connection, u64, &ClientConfig, &ServiceNames) -> Result<T, CallError>,
     ) -> Result<T, CallError> {
         let id = self.next_id;
-        self.next_id += 1;
+        self.next_id = self.next_id.wrapping_add(1);
         let result = match self.ensure_connected(timeout) {
             Ok(()) => call(self.conn.as_deref().expect("connected above"), id, &self.config, &self.names),
             Err(e) => Err(CallError::Connect(e)),
@@ -506,8 +512,19 @@ impl Client {
 
 /// An upload id unlikely to collide with another client's: time, process and map.
 fn upload_id(map: MapId) -> u64 {
+    unique_u64(map)
+}
+
+/// A number unlikely to be drawn by any other client, in this process or another,
+/// now or earlier: time, process id, a per-process counter and `salt`, mixed.
+fn unique_u64(salt: u64) -> u64 {
+    static DRAWN: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
-    let mut x = nanos ^ (u64::from(std::process::id()) << 32) ^ map.rotate_left(17);
+    let count = DRAWN.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let mut x = nanos
+        ^ (u64::from(std::process::id()) << 32)
+        ^ salt.rotate_left(17)
+        ^ count.wrapping_mul(0x9e37_79b9_7f4a_7c15);
     // splitmix64 finalizer
     x = (x ^ (x >> 30)).wrapping_mul(0xbf58476d1ce4e5b9);
     x = (x ^ (x >> 27)).wrapping_mul(0x94d049bb133111eb);
@@ -517,6 +534,13 @@ fn upload_id(map: MapId) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn request_ids_of_two_clients_do_not_start_alike() {
+        let (a, b) = (unique_u64(1), unique_u64(1));
+        assert_ne!(a, b);
+        assert_ne!(unique_u64(0x7265_7175_6573_7473), 1);
+    }
 
     #[test]
     fn client_is_send() {

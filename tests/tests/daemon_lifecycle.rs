@@ -3,7 +3,7 @@
 use dyfos_client::prelude::*;
 use dyfos_shared::answer::StopReason;
 use dyfos_shared::world::VerticalCylinder;
-use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, bin, data, signal, wait_for};
+use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, bin, data, signal, wait_for, without_micros};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -124,4 +124,60 @@ fn sigterm_finishes_in_flight_queries_and_leaves_no_shared_memory() {
     let log = daemon.log();
     assert!(log.contains("shutting down") && log.contains("dyfosd stopped"), "{log}");
     assert_eq!(sandbox.shm_leftovers(), Vec::<String>::new());
+}
+
+/// Regression (found by the soak): iceoryx2 handed the connection of a client
+/// killed mid-query to the next client, and the daemon's reply to the killed
+/// client's query arrived there. Request ids started at 1 in every client, so the
+/// next client, at the same point of the same sequence of calls, took that reply
+/// for its own answer (another map, another algorithm). Now ids start at random
+/// and the stale reply is dropped. Its own query waits behind
+/// the orphaned one (one worker takes `brute`), so it is pending when that reply is
+/// sent.
+#[test]
+fn a_reply_meant_for_a_killed_client_never_reaches_the_next_one() {
+    let sandbox = Sandbox::new("stale");
+    let _daemon = sandbox.start_daemon(&["--workers", "2"]);
+    let mut admin = sandbox.client();
+    let doomed_file = data("golden/scenarios/hard/hard_01.json");
+    let next_file = data("golden/scenarios/numerical/map_00.json");
+    admin.upload_map(1, &scenario("golden/scenarios/hard/hard_01.json").world, false, PATIENCE).unwrap();
+    admin.upload_map(2, &scenario("golden/scenarios/numerical/map_00.json").world, false, PATIENCE).unwrap();
+    let query = |file: &std::path::Path, map: &str, extra: &[&str]| {
+        Command::new(bin("dyfos"))
+            .arg("query")
+            .arg(file)
+            .args(["--algo", "brute", "--map", map])
+            .args(extra)
+            .args(sandbox.dyfos_flags())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    for seed in ["1", "2"] {
+        let mut doomed = ChildGuard(query(&doomed_file, "1", &[]));
+        wait_for("the doomed brute query to run", || (admin.stats(PATIENCE).unwrap().running >= 1).then_some(()));
+        signal(doomed.0.id(), "KILL");
+        let _ = doomed.0.wait();
+        let mut next = query(&next_file, "2", &["--budget", "20000", "--seed", seed]).wait_with_output().unwrap();
+        if !next.status.success() {
+            // The orphaned reply is dropped; iceoryx2 may still close the channel it
+            // reused, which the next client reports as a retryable error. Retried,
+            // it must get its own answer.
+            let stderr = String::from_utf8_lossy(&next.stderr);
+            assert!(stderr.contains("retry"), "{stderr}");
+            next = query(&next_file, "2", &["--budget", "20000", "--seed", seed]).wait_with_output().unwrap();
+            assert!(next.status.success(), "{}", String::from_utf8_lossy(&next.stderr));
+        }
+        let offline = Command::new(bin("dyfos"))
+            .arg("solve")
+            .arg(&next_file)
+            .args(["--algo", "brute", "--budget", "20000", "--seed", seed])
+            .output()
+            .unwrap();
+        let json = |out: &[u8]| without_micros(serde_json::from_slice(out).expect("an answer"));
+        assert_eq!(json(&next.stdout), json(&offline.stdout), "the next client got another client's answer");
+        wait_for("the orphaned query to end", || (admin.stats(PATIENCE).unwrap().running == 0).then_some(()));
+    }
 }
