@@ -4,7 +4,7 @@
 
 use super::{Daemon, Ipc};
 use crate::store::Store;
-use dyfos_shared::limits::{MAX_MAPS, MAX_PENDING_UPLOADS};
+use dyfos_shared::limits::{MAX_MAPS, MAX_OBSTACLES, MAX_OCCUPIED_VOXELS, MAX_PENDING_UPLOADS};
 use dyfos_shared::wire::map::{
     MapId, MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, world_chunks, world_from_content,
 };
@@ -62,7 +62,35 @@ struct Upload {
     bounds: Bounds,
     sun: Sun,
     deltas: Vec<MapDelta>,
+    /// Obstacle upserts and voxel cells buffered so far, bounded by what one map
+    /// may hold, so that chunks cannot grow the daemon's memory without limit
+    /// before the upload completes.
+    obstacles: usize,
+    cells: usize,
     last_chunk: Instant,
+}
+
+impl Upload {
+    /// Counts `deltas` into the buffer's totals; an error if they pass a map's
+    /// limits (the upload can never complete).
+    fn count(&mut self, deltas: &[MapDelta]) -> Result<(), Rejection> {
+        for d in deltas {
+            match d {
+                MapDelta::SetVoxels { cells, .. } => self.cells += cells.len(),
+                _ => self.obstacles += 1,
+            }
+        }
+        if self.obstacles > MAX_OBSTACLES || self.cells > MAX_OCCUPIED_VOXELS {
+            return Err(Rejection::new(
+                Status::OverCapacity,
+                format!(
+                    "upload {} carries {} obstacles and {} voxel cells so far, more than a map holds ({MAX_OBSTACLES} and {MAX_OCCUPIED_VOXELS}); the upload is abandoned",
+                    self.upload_id, self.obstacles, self.cells
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The maps, their store, uploads in progress and the last snapshot's pages.
@@ -211,6 +239,11 @@ impl Maps {
                         ),
                     ));
                 }
+                if let Err(e) = u.count(&deltas) {
+                    let u = self.uploads.remove(&map).expect("present");
+                    self.abandon(map, &u, "past a map's limits");
+                    return Err(e);
+                }
                 u.deltas.extend(deltas);
                 u.next += 1;
                 u.last_chunk = Instant::now();
@@ -268,20 +301,22 @@ impl Maps {
                 format!("{MAX_PENDING_UPLOADS} uploads are in progress, the limit; retry when one completes"),
             ));
         }
-        self.uploads.insert(
-            map,
-            Upload {
-                upload_id,
-                chunk_count,
-                next: 1,
-                replace,
-                expected_version,
-                bounds,
-                sun,
-                deltas,
-                last_chunk: Instant::now(),
-            },
-        );
+        let mut upload = Upload {
+            upload_id,
+            chunk_count,
+            next: 1,
+            replace,
+            expected_version,
+            bounds,
+            sun,
+            deltas: Vec::new(),
+            obstacles: 0,
+            cells: 0,
+            last_chunk: Instant::now(),
+        };
+        upload.count(&deltas)?;
+        upload.deltas = deltas;
+        self.uploads.insert(map, upload);
         Ok(())
     }
 

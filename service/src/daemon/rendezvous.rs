@@ -69,8 +69,14 @@ impl Queue {
         self.closed = true;
     }
 
+    /// Queries of one class waiting. Each class has its own `max_queued`, so a
+    /// flood of `brute` queries cannot make a cheap query `busy`.
+    pub(crate) fn queued_of(&self, heavy: bool) -> usize {
+        if heavy { self.heavy.len() } else { self.light.len() }
+    }
+
     fn push(&mut self, job: Job) {
-        if job.request.algorithm == Algorithm::Brute {
+        if is_heavy(job.request.algorithm) {
             self.heavy.push_back(job);
         } else {
             self.light.push_back(job);
@@ -95,6 +101,12 @@ impl Queue {
         self.running -= 1;
         self.running_heavy -= usize::from(heavy);
     }
+}
+
+/// Whether queries of `algorithm` are heavy: they may hold all workers but one,
+/// and queue apart from the others.
+fn is_heavy(algorithm: Algorithm) -> bool {
+    algorithm == Algorithm::Brute
 }
 
 fn lock<T>(m: &std::sync::Mutex<T>) -> MutexGuard<'_, T> {
@@ -211,11 +223,15 @@ fn accept(daemon: &mut Daemon, header: &RendezvousRequestHeader, records: &[Wire
     let world = daemon.maps.get(request.map).ok_or_else(|| unknown_map(request.map))?;
     check_version(request.map, &world, request.expected_version)?;
     if mode == Mode::Solve {
-        let queued = lock(&daemon.shared.queue).queued();
+        let heavy = is_heavy(request.algorithm);
+        let queued = lock(&daemon.shared.queue).queued_of(heavy);
         if queued >= daemon.config.max_queued {
+            let class = if heavy { "brute" } else { "non-brute" };
             return Err(Rejection::new(
                 Status::Busy,
-                format!("{queued} queries are waiting for a worker; retry shortly or start dyfosd with more --workers"),
+                format!(
+                    "{queued} {class} queries are waiting for a worker; retry shortly or start dyfosd with more --workers"
+                ),
             ));
         }
     }
