@@ -13,6 +13,7 @@
 //! ```
 
 pub mod mission;
+pub mod soak;
 
 use dyfos_client::{Client, ClientConfig};
 use std::path::{Path, PathBuf};
@@ -135,9 +136,48 @@ impl Sandbox {
             })
             .unwrap_or_default()
     }
+
+    /// Files of this sandbox's domain in iceoryx2's state folder ([`iceoryx_root`]:
+    /// node and service details, event sockets), as paths relative to it.
+    pub fn state_leftovers(&self) -> Vec<String> {
+        let root = iceoryx_root();
+        state_files(&root, &self.domain)
+            .into_iter()
+            .map(|p| p.strip_prefix(&root).unwrap_or(&p).display().to_string())
+            .collect()
+    }
+}
+
+/// iceoryx2's state folder (`/tmp/iceoryx2/` unless configured otherwise), where
+/// node and service details and event sockets live beside the shared memory.
+pub fn iceoryx_root() -> PathBuf {
+    PathBuf::from(iceoryx2::config::Config::default().global.root_path().to_string())
+}
+
+/// Files under `root` (at most three levels: `root/nodes/<node>/<file>`) whose name
+/// starts with `domain`.
+fn state_files(root: &Path, domain: &str) -> Vec<PathBuf> {
+    fn walk(dir: &Path, domain: &str, depth: u32, out: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(dir) else { return };
+        for e in entries.flatten() {
+            let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
+            if is_dir && depth > 0 {
+                walk(&e.path(), domain, depth - 1, out);
+            } else if !is_dir && e.file_name().to_string_lossy().starts_with(domain) {
+                out.push(e.path());
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(root, domain, 2, &mut out);
+    out.sort();
+    out
 }
 
 impl Drop for Sandbox {
+    /// Removes the state directory and everything of the domain that a killed
+    /// process left behind, in `/dev/shm` and in iceoryx2's state folder alike
+    /// (removing one without the other would leave iceoryx2 confused).
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.state_dir);
         if let Ok(entries) = std::fs::read_dir("/dev/shm") {
@@ -145,6 +185,13 @@ impl Drop for Sandbox {
                 if e.file_name().to_string_lossy().starts_with(&self.domain) {
                     let _ = std::fs::remove_file(e.path());
                 }
+            }
+        }
+        for file in state_files(&iceoryx_root(), &self.domain) {
+            let _ = std::fs::remove_file(&file);
+            // A node's folder held only that node's files: remove it once empty.
+            if let Some(dir) = file.parent().filter(|d| d.parent().is_some_and(|p| p.ends_with("nodes"))) {
+                let _ = std::fs::remove_dir(dir);
             }
         }
     }
@@ -304,6 +351,24 @@ impl RawClient {
         let pending = loan.write_from_slice(records).send().expect("send");
         self.wake.notify().expect("notify");
         wait_for("a rendezvous reply", || pending.receive().expect("receive").map(|r| *r.payload()))
+    }
+
+    /// Sends every request before reading any reply (at most the daemon's limit of
+    /// requests in flight per client), then returns the replies in order.
+    pub fn rendezvous_all(&self, requests: &[(RendezvousRequestHeader, Vec<WireDelta>)]) -> Vec<RendezvousReply> {
+        let pending: Vec<_> = requests
+            .iter()
+            .map(|(header, records)| {
+                let mut loan = self.rendezvous.loan_slice_uninit(records.len()).expect("loan");
+                *loan.user_header_mut() = *header;
+                loan.write_from_slice(records).send().expect("send")
+            })
+            .collect();
+        self.wake.notify().expect("notify");
+        pending
+            .iter()
+            .map(|p| wait_for("a rendezvous reply", || p.receive().expect("receive").map(|r| *r.payload())))
+            .collect()
     }
 
     /// Sends a map request as is and returns the reply header and records.

@@ -1,0 +1,595 @@
+//! Hostile input through the daemon's own services, written raw as a buggy or
+//! malicious peer in any language could: random bytes, NaN and infinities in every
+//! float, huge and negative counts, unknown tags, counts that disagree with the
+//! records, chunk sequences out of order, duplicated or never finished, floods past
+//! every limit. Each gets its specific error code (the one the wire decoder gives
+//! for the same bytes, where it rejects them), no map changes except by valid
+//! requests, the daemon never panics, and a well-formed client running at the same
+//! time gets correct answers throughout.
+
+use dyfos_client::prelude::*;
+use dyfos_service::search::SearchControl;
+use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS, MAX_OBSTACLES, MAX_PENDING_UPLOADS};
+use dyfos_shared::wire::map::{MapRequest, MapRequestHeader, WireDelta, encode_deltas, op, tag};
+use dyfos_shared::wire::rendezvous::{Mode, RendezvousReply, RendezvousRequestHeader, WireParams};
+use dyfos_shared::wire::{ANY_VERSION, Rejection};
+use dyfos_shared::world::{AxisBox, VerticalCylinder};
+use dyfos_tests::{PATIENCE, RawClient, Sandbox, data, without_micros};
+use rand::{Rng, RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+
+fn scenario(path: &str) -> Scenario {
+    Scenario::from_json(&std::fs::read_to_string(data(path)).unwrap()).unwrap()
+}
+
+fn status(code: u32) -> Status {
+    Status::try_from(code).unwrap_or_else(|e| panic!("the daemon replied with an unknown code: {e}"))
+}
+
+fn pole(id: u32, x: f64) -> MapDelta {
+    MapDelta::UpsertObstacle {
+        id,
+        obstacle: Obstacle::Cylinder(VerticalCylinder { center: na::Point2::new(x, 1.0), radius: 0.5, height: 4.0 }),
+    }
+}
+
+/// A client sending well-formed `dyfos` and `center` queries until told to stop,
+/// checking every answer against the offline library. Returns how many it checked
+/// and what went wrong.
+struct WellFormed {
+    stop: Arc<AtomicBool>,
+    handle: JoinHandle<(u64, Vec<String>)>,
+}
+
+impl WellFormed {
+    fn start(sandbox: &Sandbox, map: MapId, s: Scenario) -> WellFormed {
+        let mut client = sandbox.client();
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopping = Arc::clone(&stop);
+        let handle = std::thread::spawn(move || {
+            let (mut ok, mut failures) = (0u64, Vec::new());
+            let mut seed = 0u64;
+            while !stopping.load(Ordering::SeqCst) || ok == 0 {
+                let algorithm = if seed.is_multiple_of(2) { Algorithm::Dyfos } else { Algorithm::Center };
+                let request =
+                    RendezvousRequest { seed, algorithm, params: s.params, ..RendezvousRequest::new(map, s.belief) };
+                let model = NoiseModel::from_params(&s.params).unwrap();
+                let expected = dyfos_service::solve(
+                    &s.world,
+                    &s.belief,
+                    &s.params,
+                    &model,
+                    algorithm,
+                    &SearchControl::seeded(seed),
+                )
+                .map(|a| without_micros(a.to_json()));
+                match (client.rendezvous(&request, PATIENCE), expected) {
+                    (Ok(a), Ok(e)) if without_micros(a.to_json()) == e => ok += 1,
+                    (Err(e), Err(_)) if e.status() == Some(Status::NoFeasiblePose) => ok += 1,
+                    (got, expected) => failures.push(format!("seed {seed}: daemon {got:?}, offline {expected:?}")),
+                }
+                seed += 1;
+            }
+            (ok, failures)
+        });
+        WellFormed { stop, handle }
+    }
+
+    fn finish(self) -> u64 {
+        self.stop.store(true, Ordering::SeqCst);
+        let (ok, failures) = self.handle.join().expect("the well-formed client thread");
+        assert!(failures.is_empty(), "the well-formed client was disturbed:\n{}", failures.join("\n"));
+        ok
+    }
+}
+
+fn random_f64(rng: &mut ChaCha8Rng) -> f64 {
+    match rng.random_range(0..8) {
+        0 => f64::NAN,
+        1 => f64::INFINITY,
+        2 => f64::NEG_INFINITY,
+        3 => -0.0,
+        4 => f64::from_bits(rng.next_u64()),
+        _ => rng.random_range(-20.0..20.0),
+    }
+}
+
+fn random_header(rng: &mut ChaCha8Rng) -> RendezvousRequestHeader {
+    let mut f = || random_f64(rng);
+    let (mean, cov) = ([f(), f(), f()], [[f(), f(), f()], [f(), f(), f()], [f(), f(), f()]]);
+    let params = WireParams {
+        rover_radius: f(),
+        marker_size: f(),
+        marker_height: f(),
+        viewer_radius: f(),
+        safety_margin: f(),
+        z_min: f(),
+        z_max: f(),
+        camera_pitch: f(),
+        t_vs: [f(), f(), f()],
+        f_h: f(),
+        f_v: f(),
+        rho_min: f(),
+        rho_max: f(),
+        kappa: f(),
+        lambda: f(),
+        perimeter_points: rng.next_u32(),
+        model: rng.next_u32() % 5,
+    };
+    RendezvousRequestHeader {
+        request_id: rng.next_u64(),
+        map_id: rng.random_range(0..4),
+        expected_version: if rng.random() { ANY_VERSION } else { rng.next_u64() % 4 },
+        seed: rng.next_u64(),
+        budget: rng.random_range(0..3000),
+        deadline_micros: rng.next_u64() >> rng.random_range(0..64),
+        mean,
+        cov,
+        params,
+        algorithm: rng.next_u32() % 7,
+        mode: rng.next_u32() % 3,
+        reply_to: [rng.next_u64(), rng.next_u64()],
+    }
+}
+
+fn random_record(rng: &mut ChaCha8Rng) -> WireDelta {
+    WireDelta {
+        tag: rng.next_u32() % 10,
+        flag: rng.next_u32() % 3,
+        id: rng.next_u32() % 8,
+        reserved: u32::from(rng.random_range(0..20) == 0),
+        values: std::array::from_fn(|_| random_f64(rng)),
+        cell: std::array::from_fn(|_| match rng.random_range(0..6) {
+            0 => i64::MIN,
+            1 => i64::MAX,
+            2 => rng.next_u64() as i64,
+            _ => rng.random_range(-3..5),
+        }),
+    }
+}
+
+/// The status the wire decoder gives `header`, if it rejects it; the daemon must
+/// answer with the same.
+fn decoded_status(header: &RendezvousRequestHeader, records: &[WireDelta]) -> Option<Status> {
+    dyfos_shared::wire::rendezvous::RendezvousRequest::decode(header, records).err().map(|r| r.status)
+}
+
+/// Sets float number `field` of a rendezvous header: 0..17 the parameters, 17..20
+/// the belief mean, 20..29 its covariance.
+fn set_float(h: &mut RendezvousRequestHeader, field: usize, v: f64) {
+    let p = &mut h.params;
+    match field {
+        0 => p.rover_radius = v,
+        1 => p.marker_size = v,
+        2 => p.marker_height = v,
+        3 => p.viewer_radius = v,
+        4 => p.safety_margin = v,
+        5 => p.z_min = v,
+        6 => p.z_max = v,
+        7 => p.camera_pitch = v,
+        8..=10 => p.t_vs[field - 8] = v,
+        11 => p.f_h = v,
+        12 => p.f_v = v,
+        13 => p.rho_min = v,
+        14 => p.rho_max = v,
+        15 => p.kappa = v,
+        16 => p.lambda = v,
+        17..=19 => h.mean[field - 17] = v,
+        _ => h.cov[(field - 20) / 3][(field - 20) % 3] = v,
+    }
+}
+
+#[test]
+fn hostile_payloads_get_specific_errors_while_a_well_formed_client_is_served() {
+    let sandbox = Sandbox::new("hostile");
+    let mut daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let example = scenario("example.json");
+    client.upload_map(1, &example.world, false, PATIENCE).unwrap();
+    let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
+    client.create_map(2, bounds, Sun::new(0.7, 2.1).unwrap(), PATIENCE).unwrap();
+    client.apply(2, Some(0), &[pole(1, 2.0), pole(2, -3.0)], PATIENCE).unwrap();
+    let mut model = client.snapshot(2, PATIENCE).unwrap();
+    let good = WellFormed::start(&sandbox, 1, example.clone());
+    let raw = RawClient::open(&sandbox);
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
+    let valid =
+        RendezvousRequest { algorithm: Algorithm::Center, budget: Some(500), ..RendezvousRequest::new(2, belief) }
+            .header(Mode::Solve, 1, [0, 0]);
+    let mut checked = 0u64;
+
+    // --- random bytes, and valid requests with one field made random -------------
+    for i in 0..600u64 {
+        let (header, records) = if i < 300 {
+            let n = rng.random_range(0..6);
+            (random_header(&mut rng), (0..n).map(|_| random_record(&mut rng)).collect::<Vec<_>>())
+        } else {
+            let mut h = RendezvousRequestHeader { request_id: i, ..valid };
+            let noise = random_header(&mut rng);
+            match rng.random_range(0..12) {
+                0 => h.mean[rng.random_range(0..3)] = noise.mean[0],
+                1 => h.cov[rng.random_range(0..3)][rng.random_range(0..3)] = noise.cov[1][1],
+                2 => h.params.rho_min = noise.params.rho_min,
+                3 => h.params.kappa = noise.params.kappa,
+                4 => h.params.perimeter_points = noise.params.perimeter_points,
+                5 => h.params.z_max = noise.params.z_max,
+                6 => h.params.model = noise.params.model,
+                7 => h.algorithm = noise.algorithm,
+                8 => h.mode = noise.mode,
+                9 => h.deadline_micros = noise.deadline_micros,
+                10 => h.expected_version = noise.expected_version,
+                _ => h.map_id = noise.map_id,
+            }
+            (h, Vec::new())
+        };
+        let reply = raw.rendezvous(header, &records);
+        assert_eq!(reply.request_id, header.request_id, "the reply echoes the request id");
+        let got = status(reply.status);
+        if let Some(expected) = decoded_status(&header, &records) {
+            assert_eq!(got, expected, "{header:?} {records:?}: {}", reply.detail.text());
+            assert!(!reply.detail.text().is_empty());
+            checked += 1;
+        }
+    }
+    assert!(checked > 300, "only {checked} requests were rejected by the decoder");
+
+    // Map requests: random bytes, then valid batches with one number made random.
+    // A local model of map 2 says what each must do; the map must end equal to it.
+    let apply = MapRequest::Apply { map: 2, expected_version: None, deltas: vec![] }.header(0, [0, 0]);
+    for i in 0..600u64 {
+        let (header, records) = if i < 300 {
+            let h = MapRequestHeader {
+                op: rng.next_u32() % 7,
+                flags: rng.next_u32() % 3,
+                map_id: rng.random_range(1..3),
+                expected_version: if rng.random() { ANY_VERSION } else { rng.next_u64() % 8 },
+                request_id: i,
+                upload_id: rng.next_u64() % 3,
+                chunk_index: rng.next_u32() % 3,
+                chunk_count: rng.next_u32() % 4,
+                bounds: std::array::from_fn(|_| random_f64(&mut rng)),
+                sun: std::array::from_fn(|_| random_f64(&mut rng)),
+                reply_to: [rng.next_u64(), rng.next_u64()],
+            };
+            // Random requests may only read maps 1 and 2 (the others are checked).
+            let h = if h.op != op::SNAPSHOT { MapRequestHeader { map_id: 3, ..h } } else { h };
+            let n = rng.random_range(0..6);
+            (h, (0..n).map(|_| random_record(&mut rng)).collect::<Vec<_>>())
+        } else {
+            let id = rng.random_range(1..6);
+            let mut records = encode_deltas(&[pole(id, rng.random_range(-8.0..8.0))]);
+            let r = &mut records[0];
+            match rng.random_range(0..5) {
+                0 => r.values[rng.random_range(0..4)] = random_f64(&mut rng),
+                1 => r.tag = rng.next_u32() % 10,
+                2 => r.id = rng.next_u32(),
+                3 => r.cell[0] = random_record(&mut rng).cell[0],
+                _ => r.flag = rng.next_u32() % 3,
+            }
+            (MapRequestHeader { request_id: i, ..apply }, records)
+        };
+        let (reply, _) = raw.map(header, &records);
+        assert_eq!(reply.request_id, header.request_id);
+        let got = status(reply.status);
+        match MapRequest::decode(&header, &records) {
+            Err(r) => assert_eq!(got, r.status, "{header:?} {records:?}: {}", reply.detail.text()),
+            Ok(MapRequest::Apply { map: 2, deltas, .. }) => match model.apply(&deltas) {
+                Ok(next) => {
+                    assert_eq!((got, reply.version), (Status::Ok, next.version()), "{deltas:?}");
+                    model = next;
+                }
+                Err(e) => {
+                    assert_eq!(got, Status::InvalidDelta, "{deltas:?}");
+                    assert_eq!(reply.error_index, e.index as u64);
+                }
+            },
+            Ok(other) => assert!(other.map() != 2 || matches!(other, MapRequest::Snapshot { .. }), "{other:?}"),
+        }
+    }
+    assert_eq!(client.snapshot(2, PATIENCE).unwrap(), model, "map 2 differs from what its accepted batches make");
+
+    // --- NaN and infinities in every float -----------------------------------------
+    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        for field in 0..29 {
+            let mut h = valid;
+            set_float(&mut h, field, bad);
+            let expected = if field < 17 { Status::InvalidParams } else { Status::InvalidBelief };
+            assert_eq!(status(raw.rendezvous(h, &[]).status), expected, "float #{field} = {bad}");
+        }
+        // Every number of every record kind, inline and through the map service.
+        let kinds = [
+            pole(7, 1.0),
+            MapDelta::UpsertObstacle {
+                id: 8,
+                obstacle: Obstacle::Box(AxisBox {
+                    min: na::Point3::new(1.0, 1.0, 0.0),
+                    max: na::Point3::new(2.0, 2.0, 1.0),
+                }),
+            },
+            MapDelta::SetVoxels {
+                resolution: 0.5,
+                origin: na::Point3::new(0.0, 0.0, 0.0),
+                cells: vec![[1, 1, 1]],
+                occupied: true,
+            },
+            MapDelta::SetSun(Sun::new(0.3, 0.3).unwrap()),
+            MapDelta::SetBounds(bounds),
+        ];
+        for (kind, used) in kinds.iter().zip([4, 6, 4, 2, 4]) {
+            for v in 0..used {
+                let mut records = encode_deltas(std::slice::from_ref(kind));
+                records[0].values[v] = bad;
+                assert_eq!(status(raw.rendezvous(valid, &records).status), Status::InvalidDelta, "{kind:?} #{v}");
+                let (reply, _) = raw.map(apply, &records);
+                assert_eq!(status(reply.status), Status::InvalidDelta, "{kind:?} #{v} = {bad}");
+            }
+        }
+        let create = MapRequest::Create { map: 9, bounds, sun: Sun::new(0.1, 0.0).unwrap() }.header(0, [0, 0]);
+        for i in 0..6 {
+            let mut h = create;
+            if i < 4 {
+                h.bounds[i] = bad
+            } else {
+                h.sun[i - 4] = bad
+            }
+            assert_eq!(status(raw.map(h, &[]).0.status), Status::InvalidDelta, "create float #{i} = {bad}");
+        }
+    }
+
+    // --- huge and negative counts, unknown tags, counts that disagree -------------
+    let run = |n: i64, cells: &[[i64; 3]]| {
+        let mut r = vec![WireDelta {
+            tag: tag::VOXEL_RUN,
+            flag: 1,
+            values: [0.5, 0.0, 0.0, 0.0, 0.0, 0.0],
+            ..Default::default()
+        }];
+        r[0].cell[0] = n;
+        r.extend(cells.iter().map(|c| WireDelta { tag: tag::VOXEL_CELL, cell: *c, ..Default::default() }));
+        r
+    };
+    let upload = |count: u32, index: u32| {
+        MapRequest::Upload {
+            map: 5,
+            upload_id: 77,
+            chunk_index: index,
+            chunk_count: count,
+            replace: false,
+            expected_version: None,
+            bounds,
+            sun: Sun::new(0.1, 0.0).unwrap(),
+            deltas: vec![],
+        }
+        .header(0, [0, 0])
+    };
+    let rendezvous_cases: Vec<(&str, RendezvousRequestHeader, Vec<WireDelta>, Status)> = vec![
+        ("run of -1", valid, run(-1, &[]), Status::MalformedDelta),
+        ("run of i64::MIN", valid, run(i64::MIN, &[[0, 0, 0]]), Status::MalformedDelta),
+        ("run of i64::MAX", valid, run(i64::MAX, &[[0, 0, 0]]), Status::MalformedDelta),
+        ("run longer than the slice", valid, run(3, &[[0, 0, 0], [1, 0, 0]]), Status::MalformedDelta),
+        ("run shorter than its cells", valid, run(1, &[[0, 0, 0], [1, 0, 0]]), Status::MalformedDelta),
+        ("cell at i64::MIN", valid, run(1, &[[i64::MIN, 0, 0]]), Status::InvalidDelta),
+        ("cell at i64::MAX", valid, run(1, &[[0, 0, i64::MAX]]), Status::InvalidDelta),
+        ("record tag 0", valid, vec![WireDelta::default()], Status::MalformedDelta),
+        ("record tag max", valid, vec![WireDelta { tag: u32::MAX, ..Default::default() }], Status::MalformedDelta),
+        (
+            "reserved",
+            valid,
+            vec![WireDelta { tag: tag::CLEAR, reserved: 9, ..Default::default() }],
+            Status::MalformedDelta,
+        ),
+        ("flag", valid, vec![WireDelta { tag: tag::CLEAR, flag: 1, ..Default::default() }], Status::MalformedDelta),
+        ("mode", RendezvousRequestHeader { mode: u32::MAX, ..valid }, vec![], Status::MalformedRequest),
+        ("algorithm", RendezvousRequestHeader { algorithm: u32::MAX, ..valid }, vec![], Status::InvalidAlgorithm),
+        (
+            "model",
+            RendezvousRequestHeader { params: WireParams { model: u32::MAX, ..valid.params }, ..valid },
+            vec![],
+            Status::InvalidParams,
+        ),
+        (
+            "perimeter points",
+            RendezvousRequestHeader { params: WireParams { perimeter_points: u32::MAX, ..valid.params }, ..valid },
+            vec![],
+            Status::InvalidParams,
+        ),
+        ("deadline", RendezvousRequestHeader { deadline_micros: u64::MAX, ..valid }, vec![], Status::InvalidDeadline),
+        ("map id", RendezvousRequestHeader { map_id: u64::MAX, ..valid }, vec![], Status::UnknownMap),
+        (
+            "version",
+            RendezvousRequestHeader { expected_version: u64::MAX - 1, ..valid },
+            vec![],
+            Status::MapVersionMismatch,
+        ),
+        (
+            "inline past the limit",
+            valid,
+            vec![WireDelta { tag: tag::CLEAR, ..Default::default() }; MAX_INLINE_DELTAS + 1],
+            Status::OverCapacity,
+        ),
+        ("huge budget", RendezvousRequestHeader { budget: u64::MAX, map_id: 1, ..valid }, vec![], Status::Ok),
+    ];
+    for (what, header, records, expected) in rendezvous_cases {
+        let reply = raw.rendezvous(header, &records);
+        assert_eq!(status(reply.status), expected, "{what}: {}", reply.detail.text());
+    }
+    let map_cases: Vec<(&str, MapRequestHeader, Vec<WireDelta>, Status)> = vec![
+        ("apply cell at i64::MIN", apply, run(1, &[[i64::MIN, i64::MIN, i64::MIN]]), Status::InvalidDelta),
+        ("apply run past the slice", apply, run(i64::MAX, &[]), Status::MalformedDelta),
+        ("op 0", MapRequestHeader { op: 0, ..apply }, vec![], Status::MalformedRequest),
+        ("op max", MapRequestHeader { op: u32::MAX, ..apply }, vec![], Status::MalformedRequest),
+        ("flags", MapRequestHeader { flags: u32::MAX, ..apply }, vec![], Status::MalformedRequest),
+        ("chunk count max", upload(u32::MAX, 0), vec![], Status::OverCapacity),
+        ("chunk index max", upload(3, u32::MAX), vec![], Status::ChunkOutOfOrder),
+        (
+            "snapshot page max",
+            MapRequest::Snapshot { map: 2, page: u32::MAX }.header(0, [0, 0]),
+            vec![],
+            Status::ChunkOutOfOrder,
+        ),
+        (
+            "records past the limit",
+            apply,
+            vec![WireDelta { tag: tag::CLEAR, ..Default::default() }; MAX_DELTAS_PER_MESSAGE + 1],
+            Status::OverCapacity,
+        ),
+        (
+            "snapshot with records",
+            MapRequestHeader { op: op::SNAPSHOT, ..apply },
+            run(0, &[]),
+            Status::MalformedRequest,
+        ),
+    ];
+    for (what, header, records, expected) in map_cases {
+        let (reply, _) = raw.map(header, &records);
+        assert_eq!(
+            status(reply.status),
+            expected,
+            "{what}: {}",
+            Rejection::from_wire(reply.status, &reply.detail, reply.error_index)
+        );
+    }
+
+    // --- chunk sequences: out of order, duplicated, never finished -----------------
+    let chunk = |upload_id: u64, map: MapId, index: u32, count: u32| {
+        let h = MapRequest::Upload {
+            map,
+            upload_id,
+            chunk_index: index,
+            chunk_count: count,
+            replace: true,
+            expected_version: None,
+            bounds,
+            sun: Sun::new(0.1, 0.0).unwrap(),
+            deltas: vec![],
+        }
+        .header(0, [0, 0]);
+        status(raw.map(h, &encode_deltas(&[pole(index + 1, 1.0)])).0.status)
+    };
+    assert_eq!(chunk(40, 2, 1, 3), Status::ChunkOutOfOrder, "no chunk 0 yet");
+    assert_eq!(chunk(40, 2, 0, 3), Status::Ok);
+    assert_eq!(chunk(40, 2, 0, 3), Status::ChunkDuplicate);
+    assert_eq!(chunk(40, 2, 2, 3), Status::ChunkOutOfOrder);
+    assert_eq!(chunk(40, 2, 1, 4), Status::MalformedRequest, "the count changed mid-way");
+    assert_eq!(chunk(40, 2, 1, 3), Status::Ok);
+    assert_eq!(chunk(41, 2, 0, 2), Status::Ok, "a new upload supersedes the unfinished one");
+    assert_eq!(chunk(40, 2, 2, 3), Status::ChunkIncomplete);
+    // Never finished: uploads on as many maps as the daemon buffers, then one more.
+    let started: Vec<Status> = (0..MAX_PENDING_UPLOADS as u64 + 1).map(|m| chunk(50 + m, 100 + m, 0, 2)).collect();
+    let full = started.iter().position(|s| *s == Status::OverCapacity).expect("a limit on unfinished uploads");
+    assert!(started[..full].iter().all(|s| *s == Status::Ok) && full < MAX_PENDING_UPLOADS, "{started:?}");
+    assert_eq!(client.snapshot(2, PATIENCE).unwrap(), model, "unfinished uploads changed map 2");
+    let err = client.snapshot(100, PATIENCE).unwrap_err();
+    assert_eq!(err.status(), Some(Status::UnknownMap), "an unfinished upload created a map: {err}");
+
+    // The well-formed client was served correctly all along; the daemon never
+    // panicked, still answers, and stops cleanly.
+    let served = good.finish();
+    assert!(served > 0);
+    assert_eq!(client.snapshot(1, PATIENCE).unwrap(), example.world.clone());
+    let stats = client.stats(PATIENCE).unwrap();
+    assert!(stats.requests_failed > 1000, "{stats:?}");
+    drop(client);
+    drop(raw);
+    assert!(daemon.terminate().success(), "{}", daemon.log());
+    let log = daemon.log();
+    assert!(!log.contains("panicked"), "{log}");
+}
+
+/// Regression: chunks were buffered without limit until the upload completed, so
+/// one client could grow the daemon by gigabytes with an upload it never finishes.
+#[test]
+fn an_upload_past_a_maps_limits_is_refused_before_it_completes() {
+    let sandbox = Sandbox::new("bigupload");
+    let _daemon = sandbox.start_daemon(&[]);
+    let raw = RawClient::open(&sandbox);
+    let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
+    let per_chunk = MAX_DELTAS_PER_MESSAGE as u32;
+    let chunks = (MAX_OBSTACLES as u32).div_ceil(per_chunk) + 2;
+    let mut statuses = Vec::new();
+    for index in 0..chunks {
+        let deltas: Vec<MapDelta> = (0..per_chunk).map(|k| pole(index * per_chunk + k, 1.0)).collect();
+        let header = MapRequest::Upload {
+            map: 4,
+            upload_id: 1,
+            chunk_index: index,
+            chunk_count: chunks,
+            replace: false,
+            expected_version: None,
+            bounds,
+            sun: Sun::new(0.1, 0.0).unwrap(),
+            deltas: vec![],
+        }
+        .header(u64::from(index), [0, 0]);
+        let (reply, _) = raw.map(header, &encode_deltas(&deltas));
+        statuses.push(status(reply.status));
+        if statuses.last() != Some(&Status::Ok) {
+            break;
+        }
+    }
+    let refused = (MAX_OBSTACLES as u32 / per_chunk) as usize;
+    assert!(statuses[..refused].iter().all(|s| *s == Status::Ok), "{statuses:?}");
+    assert_eq!(statuses.get(refused), Some(&Status::OverCapacity), "{statuses:?}");
+    // The upload is abandoned: its next chunk is refused and no map appeared.
+    let next = MapRequest::Upload {
+        map: 4,
+        upload_id: 1,
+        chunk_index: refused as u32 + 1,
+        chunk_count: chunks,
+        replace: false,
+        expected_version: None,
+        bounds,
+        sun: Sun::new(0.1, 0.0).unwrap(),
+        deltas: vec![],
+    }
+    .header(99, [0, 0]);
+    assert_eq!(status(raw.map(next, &encode_deltas(&[pole(1, 1.0)])).0.status), Status::ChunkIncomplete);
+    let err = sandbox.client().snapshot(4, PATIENCE).unwrap_err();
+    assert_eq!(err.status(), Some(Status::UnknownMap));
+}
+
+/// Regression: `max_queued` counted every waiting query, so a flood of `brute`
+/// queries made cheap queries from other clients `busy`.
+#[test]
+fn a_brute_flood_never_makes_a_cheap_query_busy() {
+    let sandbox = Sandbox::new("flood");
+    let _daemon = sandbox.start_daemon(&["--max-queued", "3", "--workers", "2"]);
+    let mut client = sandbox.client();
+    let s = scenario("golden/scenarios/numerical/map_00.json");
+    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let brute = RendezvousRequest {
+        algorithm: Algorithm::Brute,
+        deadline: Some(std::time::Duration::from_millis(300)),
+        params: s.params,
+        ..RendezvousRequest::new(1, s.belief)
+    };
+    let good = WellFormed::start(&sandbox, 1, s.clone());
+    let replies: Vec<RendezvousReply> = std::thread::scope(|scope| {
+        let floods: Vec<_> = (0..4u64)
+            .map(|c| {
+                let sandbox = &sandbox;
+                let brute = &brute;
+                scope.spawn(move || {
+                    let raw = RawClient::open(sandbox);
+                    let requests: Vec<_> =
+                        (0..4).map(|i| (brute.header(Mode::Solve, c * 10 + i, [0, 0]), Vec::new())).collect();
+                    raw.rendezvous_all(&requests)
+                })
+            })
+            .collect();
+        floods.into_iter().flat_map(|f| f.join().expect("flood thread")).collect()
+    });
+    let count = |st: Status| replies.iter().filter(|r| r.status == st as u32).count();
+    assert!(count(Status::Busy) > 0, "the flood did not pass the limit");
+    assert_eq!(
+        count(Status::Busy) + count(Status::Ok) + count(Status::DeadlineExceeded),
+        replies.len(),
+        "{:?}",
+        replies.iter().map(|r| r.status).collect::<Vec<_>>()
+    );
+    assert!(good.finish() > 0);
+}
