@@ -26,7 +26,8 @@ struct Cli {
     #[arg(long)]
     state_dir: Option<PathBuf>,
     /// TOML file with any of: prefix, state_dir, domain, workers, spin_us,
-    /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s, model.
+    /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s, model,
+    /// worker_nice.
     #[arg(long)]
     config: Option<PathBuf>,
     /// iceoryx2 file prefix: only processes of the same domain see each other (default iceoryx2's `iox2_`).
@@ -47,6 +48,11 @@ struct Cli {
     /// Model file of the learned SDSMM (from `dyfos train`), for queries with model `learned`.
     #[arg(long, value_name = "FILE")]
     model: Option<PathBuf>,
+    /// Nice levels the search workers run below the daemon's IPC thread, 0–19
+    /// (default 0): cheap queries then preempt running searches, which also yield to
+    /// other processes. 10 suits a mix of cheap and long queries on few cores.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=19))]
+    worker_nice: Option<u8>,
 }
 
 /// The TOML file's keys; each is optional and a flag overrides it.
@@ -63,6 +69,7 @@ struct FileConfig {
     max_queued: Option<usize>,
     upload_idle_timeout_s: Option<u64>,
     model: Option<PathBuf>,
+    worker_nice: Option<u8>,
 }
 
 fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
@@ -85,6 +92,10 @@ fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
         max_queued: cli.max_queued.or(file.max_queued).unwrap_or(d.max_queued),
         upload_idle_timeout: file.upload_idle_timeout_s.map_or(d.upload_idle_timeout, Duration::from_secs),
         model: cli.model.clone().or(file.model).or(d.model),
+        worker_nice: match cli.worker_nice.or(file.worker_nice) {
+            Some(n) if n > 19 => anyhow::bail!("worker_nice = {n} must be 0–19"),
+            n => n.unwrap_or(d.worker_nice),
+        },
     })
 }
 
@@ -172,6 +183,9 @@ mod tests {
         assert_eq!(c.spin, Duration::from_micros(50));
         assert_eq!(c.upload_idle_timeout, Duration::from_secs(9));
         assert_eq!(c.max_clients, DaemonConfig::default().max_clients);
+        assert_eq!(c.worker_nice, 0);
+        assert_eq!(config(&cli(&["--worker-nice", "10"])).unwrap().worker_nice, 10);
+        assert!(Cli::try_parse_from(["dyfosd", "--worker-nice", "20"]).is_err());
         std::fs::write(&file, "prefx = \"typo/\"\n").unwrap();
         let err = format!("{:#}", config(&cli(&["--config", file.to_str().unwrap()])).unwrap_err());
         assert!(err.contains("unknown field `prefx`"), "{err}");

@@ -85,6 +85,13 @@ pub struct DaemonConfig {
     /// Model file of the learned SDSMM (`--model`), loaded at start; without one,
     /// queries for model `learned` are refused (`unsupported_model`).
     pub model: Option<PathBuf>,
+    /// How many nice levels below the IPC thread the search workers run (0–19,
+    /// `--worker-nice`, default 0: equal). With searches on every core, a worker at
+    /// the IPC thread's priority keeps it (and the clients) off the CPU for a time
+    /// slice, so a cheap query waits behind the searches; lower-priority workers are
+    /// preempted at once, but also yield to every other process of normal priority
+    /// (`bench/RESULTS.md`, latency: mixed run).
+    pub worker_nice: u8,
 }
 
 /// `$XDG_STATE_HOME/dyfos`, else `~/.local/state/dyfos`, else `./dyfos-state`.
@@ -111,6 +118,7 @@ impl Default for DaemonConfig {
             spin: Duration::from_micros(200),
             upload_idle_timeout: Duration::from_secs(30),
             model: None,
+            worker_nice: 0,
         }
     }
 }
@@ -178,6 +186,27 @@ pub fn iceoryx_config(domain: Option<&str>) -> Result<iceoryx2::config::Config, 
         };
     }
     Ok(config)
+}
+
+/// Lowers the calling thread's priority by `levels` nice levels (from the
+/// process's, at most to 19). Lowering needs no privilege; a failure is logged and
+/// the worker runs at the IPC thread's priority.
+fn lower_priority(levels: u8) {
+    if levels == 0 {
+        return;
+    }
+    #[cfg(target_os = "linux")]
+    {
+        use rustix::process::{getpriority_process, setpriority_process};
+        // On Linux, nice is per thread: `Some(tid)` names this thread only.
+        let tid = rustix::thread::gettid();
+        let nice = getpriority_process(Some(tid)).unwrap_or(0) + i32::from(levels);
+        if let Err(e) = setpriority_process(Some(tid), nice.min(19)) {
+            warn!("cannot lower the priority of a search worker ({e}); it runs at the daemon's priority");
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    debug!("worker priority is left as is on this system");
 }
 
 /// State shared by the IPC thread and the workers.
@@ -339,12 +368,16 @@ impl Daemon {
             threads,
             learned,
         });
+        let worker_nice = config.worker_nice.min(19);
         let workers = (0..threads)
             .map(|i| {
                 let shared = Arc::clone(&shared);
                 std::thread::Builder::new()
                     .name(format!("dyfos-worker-{i}"))
-                    .spawn(move || rendezvous::worker(&shared))
+                    .spawn(move || {
+                        lower_priority(worker_nice);
+                        rendezvous::worker(&shared)
+                    })
                     .map_err(|e| DaemonCreateError::Ipc(format!("cannot start worker thread: {e}")))
             })
             .collect::<Result<Vec<_>, _>>()?;

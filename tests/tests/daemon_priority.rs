@@ -1,0 +1,50 @@
+//! `dyfosd --worker-nice N`: the search workers run N nice levels below the thread
+//! that answers requests, so cheap queries preempt running searches
+//! (`bench/RESULTS.md`, latency: mixed run). Linux only: read from `/proc`.
+
+#![cfg(target_os = "linux")]
+
+use dyfos_tests::Sandbox;
+
+/// Nice value of every thread of `pid`, by thread name.
+fn thread_nices(pid: u32) -> Vec<(String, i32)> {
+    let mut out = Vec::new();
+    for task in std::fs::read_dir(format!("/proc/{pid}/task")).expect("the daemon's threads").flatten() {
+        let comm = std::fs::read_to_string(task.path().join("comm")).unwrap_or_default().trim().to_string();
+        let stat = std::fs::read_to_string(task.path().join("stat")).unwrap_or_default();
+        // Fields after the `(comm)`: state is field 3, nice field 19.
+        let Some((_, rest)) = stat.rsplit_once(')') else { continue };
+        if let Some(nice) = rest.split_whitespace().nth(16).and_then(|n| n.parse().ok()) {
+            out.push((comm, nice));
+        }
+    }
+    out
+}
+
+fn workers_and_main(pid: u32) -> (Vec<i32>, i32) {
+    let threads = thread_nices(pid);
+    let workers: Vec<i32> = threads.iter().filter(|(c, _)| c.starts_with("dyfos-worker")).map(|(_, n)| *n).collect();
+    let main = threads.iter().find(|(c, _)| c == "dyfosd").map(|(_, n)| *n).expect("the IPC thread");
+    (workers, main)
+}
+
+#[test]
+fn worker_nice_lowers_only_the_search_workers() {
+    let sandbox = Sandbox::new("worker-nice");
+    let daemon = sandbox.start_daemon(&["--worker-nice", "7", "--workers", "3"]);
+    let (workers, main) = workers_and_main(daemon.pid());
+    assert_eq!(workers.len(), 3, "{:?}", thread_nices(daemon.pid()));
+    assert!(workers.iter().all(|n| *n == (main + 7).min(19)), "workers {workers:?}, IPC thread {main}");
+    // It still answers (a query runs on a lowered worker).
+    let mut client = sandbox.client();
+    assert_eq!(client.stats(dyfos_tests::PATIENCE).unwrap().workers, 3);
+    drop(daemon);
+
+    let sandbox = Sandbox::new("worker-nice-default");
+    let daemon = sandbox.start_daemon(&[]);
+    let (workers, main) = workers_and_main(daemon.pid());
+    assert!(
+        !workers.is_empty() && workers.iter().all(|n| *n == main),
+        "default keeps them equal: {workers:?} vs {main}"
+    );
+}
