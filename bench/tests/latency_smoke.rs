@@ -20,6 +20,8 @@ fn latency_command_smoke_run() {
     let output = Command::new(&exe)
         .args(["latency", "--seconds", "0.2", "--clients", "1,2", "--open-clients", "2", "--maps", "2"])
         .args(["--null-rates", "300", "--dyfos-rates", "30", "--mixed-null-rate", "300", "--mixed-dyfos-clients", "1"])
+        // A second daemon with another spin window, for the before/after table.
+        .arg("--compare-daemon-arg=--spin-us=50")
         .arg("--out")
         .arg(&out)
         .output()
@@ -38,6 +40,8 @@ fn latency_command_smoke_run() {
     }
     assert!(stdout.contains("in-process `dyfos` query"), "{stdout}");
     assert!(stdout.contains("### Mixed"), "{stdout}");
+    assert!(stdout.contains("(before) and with `--spin-us=50` (after)"), "{stdout}");
+    assert!(stdout.contains("| null open loop, 300/s over 1 client(s), beside dyfos closed loop"), "{stdout}");
     assert!(stdout.contains("Daemon shutdown: clean (SIGTERM, exit 0)"), "{stdout}");
     assert!(stdout.contains("shared-memory files left in /dev/shm: none"), "{stdout}");
 
