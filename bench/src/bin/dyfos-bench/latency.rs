@@ -218,6 +218,19 @@ struct Bench<'a> {
     domain: String,
     tmp: PathBuf,
     floor_service: String,
+    /// The running daemon's process id (for its CPU time), 0 if none.
+    daemon_pid: std::cell::Cell<u32>,
+}
+
+/// CPU time (user + system) of process `pid` so far, s; `None` if unreadable.
+/// `/proc/PID/stat` counts clock ticks of 1/100 s (Linux's `USER_HZ`).
+fn cpu_seconds(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let (_, rest) = stat.rsplit_once(')')?;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    // Fields after the `(comm)` start at field 3 (state); utime and stime are 14 and 15.
+    let ticks: u64 = fields.get(11)?.parse::<u64>().ok()? + fields.get(12)?.parse::<u64>().ok()?;
+    Some(ticks as f64 / 100.0)
 }
 
 /// Client processes of one workload in one configuration.
@@ -259,6 +272,8 @@ struct Row {
     latency: Option<Latencies>,
     /// Open loop: how late the client processes sent (their own scheduling delay).
     late: Option<Latencies>,
+    /// Cores the daemon kept busy during the run (its CPU time / wall time).
+    daemon_cpu: Option<f64>,
     /// `dyfos`: search time in the daemon, and end-to-end minus search.
     search: Option<Latencies>,
     overhead: Option<Latencies>,
@@ -295,6 +310,7 @@ impl Row {
             clients: group.clients,
             rate: group.rate,
             alongside: None,
+            daemon_cpu: None,
             throughput,
             latency: Latencies::of_nanos(&mut latency),
             late: Latencies::of_nanos(&mut late),
@@ -351,6 +367,8 @@ impl Bench<'_> {
             stdin.write_all(b"go\n")?;
             stdin.flush()?;
         }
+        let daemon = self.daemon_pid.get();
+        let (cpu_start, wall_start) = (cpu_seconds(daemon), Instant::now());
         let limit = Duration::from_secs_f64(a.seconds * 3.0) + TIMEOUT;
         let mut runs: Vec<Vec<RunSamples>> = vec![Vec::new(); groups.len()];
         for (c, (g, out)) in children.iter_mut().zip(&outputs) {
@@ -362,10 +380,14 @@ impl Bench<'_> {
             runs[*g].push(serde_json::from_str::<RunSamples>(&text).with_context(|| format!("{}", out.display()))?);
             let _ = std::fs::remove_file(out);
         }
+        let daemon_cpu = match (cpu_start, cpu_seconds(daemon)) {
+            (Some(a), Some(b)) => Some((b - a) / wall_start.elapsed().as_secs_f64()),
+            _ => None,
+        };
         let rows = groups.iter().zip(runs).enumerate().map(|(g, (group, runs))| {
             let others: Vec<String> =
                 groups.iter().enumerate().filter(|(o, _)| *o != g).map(|(_, o)| o.label()).collect();
-            Row { alongside: (!others.is_empty()).then(|| others.join(" + ")), ..Row::of(*group, runs) }
+            Row { alongside: (!others.is_empty()).then(|| others.join(" + ")), daemon_cpu, ..Row::of(*group, runs) }
         });
         Ok(rows.collect())
     }
@@ -431,6 +453,14 @@ fn errors_cell(row: &Row) -> String {
     if parts.is_empty() { "0".into() } else { parts.join(", ") }
 }
 
+/// The daemon's CPU use during the run, in % of one core.
+fn cpu_cell(r: &Row) -> String {
+    match (r.workload, r.daemon_cpu) {
+        (Workload::Floor, _) | (_, None) => "–".into(),
+        (_, Some(c)) => format!("{:.0} %", c * 100.0),
+    }
+}
+
 fn latency_cells(l: Option<Latencies>) -> String {
     match l {
         Some(l) => {
@@ -443,20 +473,21 @@ fn latency_cells(l: Option<Latencies>) -> String {
 fn table(rows: &[&Row], open: bool) -> String {
     let mut out = String::new();
     if open {
-        out.push_str("| workload | clients | offered /s | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | sent late p99 µs | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
+        out.push_str("| workload | clients | offered /s | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | sent late p99 µs | dyfosd CPU | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     } else {
-        out.push_str("| workload | clients | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---|\n");
+        out.push_str("| workload | clients | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | dyfosd CPU | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
     }
     for r in rows {
         let offered = r.rate.map_or(String::new(), |x| format!(" {x:.0} |"));
         let late = if open { format!(" {} |", r.late.map_or("–".into(), |l| us(l.p99_us))) } else { String::new() };
         let _ = writeln!(
             out,
-            "| {} | {} |{offered} {:.0} | {} |{late} {} |",
+            "| {} | {} |{offered} {:.0} | {} |{late} {} | {} |",
             r.workload.name(),
             r.clients,
             r.throughput,
             latency_cells(r.latency),
+            cpu_cell(r),
             errors_cell(r)
         );
     }
@@ -501,6 +532,7 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
         domain: format!("dyb{pid}_"),
         floor_service: format!("bench-latency-{pid}/floor"),
         tmp: tmp.clone(),
+        daemon_pid: std::cell::Cell::new(0),
     };
     let load_before = load_average();
     let result = run_with_daemon(&b, &dyfosd).and_then(|(mut report, rows, shutdown)| {
@@ -541,6 +573,7 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     let state = b.tmp.join("state");
     let log = b.tmp.join("dyfosd.log");
     let mut daemon = start_daemon(b, dyfosd, &[], &state, &log)?;
+    b.daemon_pid.set(daemon.id());
     let config = ClientConfig {
         prefix: b.prefix.clone(),
         domain: Some(b.domain.clone()),
@@ -685,6 +718,7 @@ fn run_baseline(b: &Bench, dyfosd: &Path) -> anyhow::Result<Vec<Row>> {
     let log = b.tmp.join("dyfosd-baseline.log");
     eprintln!("latency: second daemon with {}", a.compare_daemon_args.join(" "));
     let mut daemon = start_daemon(b, dyfosd, &a.compare_daemon_args, &state, &log)?;
+    b.daemon_pid.set(daemon.id());
     let config = ClientConfig {
         prefix: b.prefix.clone(),
         domain: Some(b.domain.clone()),
@@ -715,13 +749,13 @@ fn before_after(before: &[Row], after: &[Row], flags: &[String]) -> String {
         "\n### The same configurations, same run: dyfosd as above (before) and with `{}` (after)\n\n",
         flags.join(" ")
     );
-    out.push_str("| configuration | before: answered /s | p50 µs | p99 µs | after: answered /s | p50 µs | p99 µs |\n|---|---:|---:|---:|---:|---:|---:|\n");
+    out.push_str("| configuration | before: answered /s | p50 µs | p99 µs | dyfosd CPU | after: answered /s | p50 µs | p99 µs | dyfosd CPU |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     let same = |x: &Row, y: &Row| {
         x.workload == y.workload && x.clients == y.clients && x.rate == y.rate && x.alongside == y.alongside
     };
     let cells = |r: &Row| match r.latency {
-        Some(l) => format!("{:.0} | {} | {}", r.throughput, us(l.p50_us), us(l.p99_us)),
-        None => format!("{:.0} | – | –", r.throughput),
+        Some(l) => format!("{:.0} | {} | {} | {}", r.throughput, us(l.p50_us), us(l.p99_us), cpu_cell(r)),
+        None => format!("{:.0} | – | – | {}", r.throughput, cpu_cell(r)),
     };
     for a in after {
         let Some(b) = before.iter().find(|b| same(a, b)) else { continue };
@@ -863,6 +897,7 @@ fn write_files(args: &LatencyArgs, report: &str, rows: &[Row]) -> anyhow::Result
                 "unsent": r.unsent,
                 "sent_late": l(r.late),
                 "alongside": r.alongside,
+                "daemon_cpu_cores": r.daemon_cpu,
             })
         })
         .collect();
