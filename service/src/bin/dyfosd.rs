@@ -42,7 +42,7 @@ struct Cli {
     /// Most client connections per service (default 64).
     #[arg(long)]
     max_clients: Option<usize>,
-    /// Most queries waiting for a worker before `busy` (default 256).
+    /// Most queries waiting for a worker before `busy`, brute and the others each (default 256).
     #[arg(long)]
     max_queued: Option<usize>,
     /// Model file of the learned SDSMM (from `dyfos train`), for queries with model `learned`.

@@ -14,7 +14,7 @@ use iceoryx2::active_request::ActiveRequest;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tracing::{debug, info, warn};
+use tracing::{debug, error, info, warn};
 
 type MapActive = ActiveRequest<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapReplyHeader>;
 
@@ -26,6 +26,20 @@ pub(crate) fn unknown_map(id: MapId) -> Rejection {
         Status::UnknownMap,
         format!("no map {id}; create it (`dyfos map create`, Client::create_map) or upload it first"),
     )
+}
+
+/// Runs `handle` (the handling of one request); a panic in it, a bug, becomes an
+/// `internal_error` reply instead of taking the daemon (or a worker) down or
+/// leaving the client without an answer. What `handle` changes is committed last
+/// (`Maps::commit`), so a panic before that leaves every map as it was.
+pub(crate) fn guarded<T>(what: &str, handle: impl FnOnce() -> Result<T, Rejection>) -> Result<T, Rejection> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(handle)).unwrap_or_else(|_| {
+        error!("handling a {what} request panicked; it was answered with internal_error");
+        Err(Rejection::new(
+            Status::Internal,
+            format!("dyfosd hit a bug handling this {what} request (see its log); nothing changed, please report it"),
+        ))
+    })
 }
 
 pub(crate) fn check_version(id: MapId, world: &World, expected: Option<u64>) -> Result<(), Rejection> {
@@ -421,7 +435,8 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
 pub(super) fn on_request(daemon: &mut Daemon, active: MapActive) {
     let header = *active.user_header();
     let reply_to = join_u128(header.reply_to);
-    let result = MapRequest::decode(&header, active.payload()).and_then(|request| handle(daemon, request));
+    let result =
+        guarded("map", || MapRequest::decode(&header, active.payload()).and_then(|request| handle(daemon, request)));
     let reply = match result {
         Ok(reply) => {
             if let Ok(mut s) = daemon.shared.stats.lock() {
@@ -463,4 +478,18 @@ pub(super) fn on_request(daemon: &mut Daemon, active: MapActive) {
         Err(e) => warn!("map reply not delivered: {e:?}"),
     }
     daemon.shared.notify(reply_to);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_panic_while_handling_a_request_becomes_internal_error() {
+        let answer: Result<u32, Rejection> = guarded("test", || panic!("a bug"));
+        assert_eq!(answer.unwrap_err().status, Status::Internal);
+        assert_eq!(guarded("test", || Ok(7)), Ok(7));
+        let refused: Result<(), Rejection> = guarded("test", || Err(unknown_map(3)));
+        assert_eq!(refused.unwrap_err().status, Status::UnknownMap);
+    }
 }

@@ -75,7 +75,9 @@ pub struct DaemonConfig {
     pub max_clients: usize,
     /// Most requests one client port may have in flight.
     pub max_requests_per_client: usize,
-    /// Most queries waiting for a worker before new ones get `busy`.
+    /// Most queries waiting for a worker before new ones get `busy`, per class:
+    /// `brute` queries and the others queue apart, so a flood of one class never
+    /// makes the other busy.
     pub max_queued: usize,
     /// How long the IPC thread keeps polling after its last request before it
     /// sleeps on the wake-up event.

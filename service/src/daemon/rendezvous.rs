@@ -1,6 +1,6 @@
 //! The rendezvous service: validate on the IPC thread, search on a worker.
 
-use super::map::{check_version, invalid_delta, unknown_map};
+use super::map::{check_version, guarded, invalid_delta, unknown_map};
 use super::{Daemon, Ipc, Shared};
 use crate::search::SearchControl;
 use crate::{SearchError, solve};
@@ -129,7 +129,8 @@ pub(crate) fn worker(shared: &Shared) {
             }
         };
         // A bug in a search must not take the worker (and the shutdown's count of
-        // queries in flight) with it; the client sees its request dropped.
+        // queries in flight) with it; `run` answers `internal_error` for a panic in
+        // the search itself, this catches the rest.
         if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(shared, job))).is_err() {
             error!("a search panicked; its query was dropped");
         }
@@ -158,23 +159,22 @@ fn run(shared: &Shared, job: Job) {
             ),
         )
     } else {
-        match NoiseModel::from_params_and_weights(&request.params, shared.learned.as_ref()) {
-            Err(e) => RendezvousReply::rejected(request_id, &Rejection::new(Status::UnsupportedModel, e.to_string())),
-            Ok(model) => {
-                let control =
-                    SearchControl { seed: request.seed, budget: request.budget, deadline, threads: shared.threads };
-                match solve(&world, &request.belief, &request.params, &model, request.algorithm, &control) {
-                    Ok(answer) => RendezvousReply::answer(request_id, &answer),
-                    Err(e @ SearchError::NoFeasiblePose { stop, .. }) => {
-                        let status = if stop == StopReason::Deadline {
-                            Status::DeadlineExceeded
-                        } else {
-                            Status::NoFeasiblePose
-                        };
-                        RendezvousReply::rejected(request_id, &Rejection::new(status, e.to_string()))
-                    }
-                }
-            }
+        let searched = guarded("rendezvous", || {
+            let model = NoiseModel::from_params_and_weights(&request.params, shared.learned.as_ref())
+                .map_err(|e| Rejection::new(Status::UnsupportedModel, e.to_string()))?;
+            let control =
+                SearchControl { seed: request.seed, budget: request.budget, deadline, threads: shared.threads };
+            solve(&world, &request.belief, &request.params, &model, request.algorithm, &control).map_err(
+                |e @ SearchError::NoFeasiblePose { stop, .. }| {
+                    let status =
+                        if stop == StopReason::Deadline { Status::DeadlineExceeded } else { Status::NoFeasiblePose };
+                    Rejection::new(status, e.to_string())
+                },
+            )
+        });
+        match searched {
+            Ok(answer) => RendezvousReply::answer(request_id, &answer),
+            Err(rejection) => RendezvousReply::rejected(request_id, &rejection),
         }
     };
     let micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
@@ -257,7 +257,7 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
     let request_id = header.request_id;
     let reply_to = join_u128(header.reply_to);
     trace!(request_id, records = active.payload().len(), "rendezvous request");
-    match accept(daemon, &header, active.payload()) {
+    match guarded("rendezvous", || accept(daemon, &header, active.payload())) {
         Err(rejection) => {
             debug!(request_id, status = %rejection.status, "rendezvous request rejected: {}", rejection.message);
             lock(&daemon.shared.stats).failed(rejection.status);

@@ -174,6 +174,9 @@ statuses! {
     StorageFailed = 19, "storage_failed";
     /// The daemon is shutting down and takes no new work.
     ShuttingDown = 20, "shutting_down";
+    /// The daemon hit a bug while handling the request (its log says where); the
+    /// request changed nothing and other requests are still served. Please report it.
+    Internal = 21, "internal_error";
 }
 
 impl std::fmt::Display for Status {
