@@ -22,6 +22,8 @@ fn latency_command_smoke_run() {
         .args(["--null-rates", "300", "--dyfos-rates", "30", "--mixed-null-rate", "300", "--mixed-dyfos-clients", "1"])
         // A second daemon with another spin window, for the before/after table.
         .arg("--compare-daemon-arg=--spin-us=50")
+        // Clients with a shorter poll window than the library default.
+        .args(["--client-spin-us", "100"])
         .arg("--out")
         .arg(&out)
         .output()

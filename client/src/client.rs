@@ -31,8 +31,12 @@ pub struct ClientConfig {
     pub prefix: String,
     /// How long [`Client::connect`] (and a reconnect) waits for the daemon to appear.
     pub connect_timeout: Duration,
-    /// How long to busy-poll for a reply before sleeping on the reply event. Short
-    /// replies then arrive without a wake-up (see `bench/RESULTS.md`).
+    /// How long to poll for a reply (yielding the core between polls) before
+    /// sleeping on the reply event. Replies within the window arrive without an event
+    /// wake-up, which costs 50–100 µs on a 2-core VM. The default, 1 ms, covers a
+    /// typical `dyfos` query (≈0.55 ms); longer windows cut a lone client's latency a
+    /// little more but cost throughput when more clients than cores poll at once
+    /// (`bench/RESULTS.md`, "Client spin window").
     pub spin: Duration,
     /// iceoryx2 file prefix (its `global.prefix`, default `iox2_`): processes see each
     /// other only within one domain. `None` keeps iceoryx2's default. The daemon's
@@ -45,7 +49,7 @@ impl Default for ClientConfig {
         ClientConfig {
             prefix: DEFAULT_PREFIX.to_string(),
             connect_timeout: Duration::from_secs(2),
-            spin: Duration::from_micros(200),
+            spin: Duration::from_millis(1),
             domain: None,
         }
     }

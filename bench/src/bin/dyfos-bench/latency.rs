@@ -73,6 +73,10 @@ pub struct LatencyArgs {
     /// Directory for the table (markdown), summary (JSON) and plots (SVG).
     #[arg(long, default_value = "bench/out")]
     out: PathBuf,
+    /// How long each client busy-polls for a reply before it sleeps on the reply
+    /// event (`ClientConfig::spin`), µs; default: the client library's default.
+    #[arg(long)]
+    client_spin_us: Option<u64>,
 }
 
 /// Flags of the hidden `latency-worker` mode: one client process.
@@ -102,6 +106,9 @@ pub struct WorkerArgs {
     /// Where to write the samples (JSON).
     #[arg(long)]
     out: PathBuf,
+    /// `ClientConfig::spin`, µs.
+    #[arg(long)]
+    client_spin_us: Option<u64>,
 }
 
 fn parse_workload(s: &str) -> Result<Workload, String> {
@@ -149,11 +156,12 @@ pub fn worker(args: &WorkerArgs) -> anyhow::Result<()> {
             drive(arrivals, duration, args.seed, stream, |_| floor.call(TIMEOUT))
         }
         workload @ (Workload::Null | Workload::Dyfos) => {
+            let defaults = ClientConfig::default();
             let config = ClientConfig {
                 prefix: args.prefix.clone(),
                 domain: Some(args.domain.clone()),
                 connect_timeout: TIMEOUT,
-                ..ClientConfig::default()
+                spin: args.client_spin_us.map_or(defaults.spin, Duration::from_micros),
             };
             let mut client = Client::connect(&config)?;
             let mut call = |k: usize| {
@@ -342,6 +350,7 @@ impl Bench<'_> {
                     .args(["--rate", &per_client.to_string(), "--seconds", &a.seconds.to_string()])
                     .args(["--seed", &a.seed.to_string(), "--maps", &a.maps.to_string(), "--index", &i.to_string()])
                     .args(["--floor-service", &self.floor_service])
+                    .args(a.client_spin_us.iter().flat_map(|us| ["--client-spin-us".to_string(), us.to_string()]))
                     .arg("--out")
                     .arg(&out)
                     .stdin(Stdio::piped())
