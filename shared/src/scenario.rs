@@ -76,6 +76,42 @@ impl ScenarioError {
     }
 }
 
+/// A record that must be written as a JSON object (SPEC §11). serde's derived
+/// structs also accept their fields in order as a JSON array (`"sun": [0.7, 2.1]`);
+/// this wrapper asks the parser for an object only, so an array, like `null`, is
+/// "invalid type: sequence, expected a JSON object".
+#[derive(Debug)]
+struct Object<T>(T);
+
+impl<'de, T: Deserialize<'de>> Deserialize<'de> for Object<T> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct ObjectVisitor<T>(std::marker::PhantomData<T>);
+        impl<'de, T: Deserialize<'de>> serde::de::Visitor<'de> for ObjectVisitor<T> {
+            type Value = T;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a JSON object")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<T, A::Error> {
+                T::deserialize(serde::de::value::MapAccessDeserializer::new(map))
+            }
+        }
+        d.deserialize_map(ObjectVisitor(std::marker::PhantomData)).map(Object)
+    }
+}
+
+impl<T> std::ops::Deref for Object<T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        &self.0
+    }
+}
+
+impl<T: Serialize> Serialize for Object<T> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.0.serialize(s)
+    }
+}
+
 /// Deserializes a field that may be absent but, if present, must not be `null`.
 fn present<'de, D: Deserializer<'de>, T: Deserialize<'de>>(d: D) -> Result<Option<T>, D::Error> {
     T::deserialize(d).map(Some)
@@ -85,13 +121,13 @@ fn present<'de, D: Deserializer<'de>, T: Deserialize<'de>>(d: D) -> Result<Optio
 #[serde(deny_unknown_fields)]
 struct RawScenario {
     bounds: [f64; 4],
-    sun: RawSun,
-    obstacles: Vec<RawObstacle>,
-    rover: RawRover,
+    sun: Object<RawSun>,
+    obstacles: Vec<Object<RawObstacle>>,
+    rover: Object<RawRover>,
     #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
-    params: Option<RawParams>,
+    params: Option<Object<RawParams>>,
     #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
-    voxels: Option<RawVoxels>,
+    voxels: Option<Object<RawVoxels>>,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -106,9 +142,9 @@ struct RawSun {
 struct RawObstacle {
     id: u32,
     #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
-    cylinder: Option<RawCylinder>,
+    cylinder: Option<Object<RawCylinder>>,
     #[serde(rename = "box", default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
-    box_: Option<RawBox>,
+    box_: Option<Object<RawBox>>,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -255,7 +291,7 @@ impl Scenario {
     /// Parses and validates a scenario document.
     pub fn from_json(json: &str) -> Result<Self, ScenarioError> {
         let de = &mut serde_json::Deserializer::from_str(json);
-        let raw: RawScenario = serde_path_to_error::deserialize(de).map_err(|e| {
+        let raw: Object<RawScenario> = serde_path_to_error::deserialize(de).map_err(|e| {
             let mut path = e.path().to_string();
             if inner_is_unknown_field(&e) {
                 // The path ends in the unknown name itself; report its parent.
@@ -271,7 +307,7 @@ impl Scenario {
             };
             ScenarioError::Malformed { path, message: suggest(message), line, column }
         })?;
-        Self::from_raw(raw)
+        Self::from_raw(raw.0)
     }
 
     fn from_raw(raw: RawScenario) -> Result<Self, ScenarioError> {
@@ -332,7 +368,7 @@ impl Scenario {
                 ScenarioError::invalid("rover.cov", format!("{c}: need a symmetric positive definite matrix"))
             }
         })?;
-        let params = raw.params.as_ref().map(RawParams::resolve).unwrap_or_default();
+        let params = raw.params.as_ref().map(|p| p.resolve()).unwrap_or_default();
         params
             .validate()
             .map_err(|e| ScenarioError::invalid(format!("params.{}", e.field), format!("= {} {}", e.value, e.rule)))?;
@@ -345,34 +381,36 @@ impl Scenario {
         let w = &self.world;
         let raw = RawScenario {
             bounds: w.bounds().to_array(),
-            sun: RawSun { elevation: w.sun().elevation, azimuth: w.sun().azimuth },
+            sun: Object(RawSun { elevation: w.sun().elevation, azimuth: w.sun().azimuth }),
             obstacles: w
                 .obstacles()
                 .iter()
                 .map(|(id, o)| match o {
-                    Obstacle::Cylinder(c) => RawObstacle {
+                    Obstacle::Cylinder(c) => Object(RawObstacle {
                         id: *id,
-                        cylinder: Some(RawCylinder {
+                        cylinder: Some(Object(RawCylinder {
                             x: c.center.x,
                             y: c.center.y,
                             radius: c.radius,
                             height: c.height,
-                        }),
+                        })),
                         box_: None,
-                    },
-                    Obstacle::Box(b) => RawObstacle {
+                    }),
+                    Obstacle::Box(b) => Object(RawObstacle {
                         id: *id,
                         cylinder: None,
-                        box_: Some(RawBox { min: b.min.coords.into(), max: b.max.coords.into() }),
-                    },
+                        box_: Some(Object(RawBox { min: b.min.coords.into(), max: b.max.coords.into() })),
+                    }),
                 })
                 .collect(),
-            rover: RawRover { mean: self.belief.mean.into(), cov: rows3(self.belief.cov.matrix()) },
-            params: Some(RawParams::explicit(&self.params)),
-            voxels: w.voxels().map(|v| RawVoxels {
-                resolution: v.resolution(),
-                origin: v.origin().coords.into(),
-                occupied: v.occupied().copied().collect(),
+            rover: Object(RawRover { mean: self.belief.mean.into(), cov: rows3(self.belief.cov.matrix()) }),
+            params: Some(Object(RawParams::explicit(&self.params))),
+            voxels: w.voxels().map(|v| {
+                Object(RawVoxels {
+                    resolution: v.resolution(),
+                    origin: v.origin().coords.into(),
+                    occupied: v.occupied().copied().collect(),
+                })
             }),
         };
         serde_json::to_string_pretty(&raw).expect("scenario serializes")
@@ -458,6 +496,43 @@ mod tests {
         }
         assert!(matches!(Scenario::from_json("{"), Err(ScenarioError::Malformed { .. })));
         assert!(matches!(Scenario::from_json("[]"), Err(ScenarioError::Malformed { .. })));
+    }
+
+    /// SPEC §11: `params` and `voxels` are objects if present, and so is every other
+    /// record. serde's derived structs would also take the fields in order as a JSON
+    /// array (`"sun": [0.7, 2.1]`); that is not a scenario.
+    #[test]
+    fn records_written_as_arrays_are_rejected() {
+        let cases = [
+            ("\"params\": {\"model\": \"paper\"}", "\"params\": []", "params"),
+            ("\"params\": {\"model\": \"paper\"}", "\"voxels\": [0.5, [0, 0, 0], [[1, 2, 3]]]", "voxels"),
+            ("{\"elevation\": 0.7, \"azimuth\": 2.1}", "[0.7, 2.1]", "sun"),
+            (
+                "{\"x\": 2.0, \"y\": 1.0, \"radius\": 0.5, \"height\": 10.0}",
+                "[2.0, 1.0, 0.5, 10.0]",
+                "obstacles[0].cylinder",
+            ),
+            (
+                "{\"min\": [4.0, 4.0, 0.0], \"max\": [5.0, 6.0, 3.0]}",
+                "[[4.0, 4.0, 0.0], [5.0, 6.0, 3.0]]",
+                "obstacles[1].box",
+            ),
+            ("{\"id\": 2, \"box\": {\"min\": [4.0, 4.0, 0.0], \"max\": [5.0, 6.0, 3.0]}}", "[2]", "obstacles[1]"),
+            (
+                "\"rover\": {\"mean\"",
+                "\"rover\": [[0, 0, 0], [[1, 0, 0], [0, 1, 0], [0, 0, 1]]], \"unused\": {\"mean\"",
+                "rover",
+            ),
+        ];
+        for (from, to, path) in cases {
+            let err = with(from, to).unwrap_err();
+            assert!(matches!(err, ScenarioError::Malformed { .. }), "`{to}` gave `{err}`");
+            assert_eq!(err.path(), path, "`{to}` gave `{err}`");
+            assert!(err.to_string().contains("expected a JSON object"), "`{to}` gave `{err}`");
+        }
+        let positional = r#"[[-10, -10, 10, 10], {"elevation": 0.7, "azimuth": 2.1}, [],
+            {"mean": [0, 0, 0.3], "cov": [[0.2, 0, 0], [0, 0.1, 0], [0, 0, 0.05]]}]"#;
+        assert!(Scenario::from_json(positional).is_err());
     }
 
     #[test]
