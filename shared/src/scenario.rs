@@ -287,26 +287,32 @@ fn inner_is_unknown_field(e: &serde_path_to_error::Error<serde_json::Error>) -> 
     e.inner().to_string().starts_with("unknown field")
 }
 
+/// A parse error of the field at `path`, with serde_json's position.
+fn malformed(path: String, inner: serde_json::Error) -> ScenarioError {
+    let (line, column) = (inner.line(), inner.column());
+    // serde_json appends " at line L column C"; we print those ourselves.
+    let text = inner.to_string();
+    let message = match text.rfind(" at line ") {
+        Some(i) => text[..i].to_string(),
+        None => text,
+    };
+    ScenarioError::Malformed { path, message: suggest(message), line, column }
+}
+
 impl Scenario {
-    /// Parses and validates a scenario document.
+    /// Parses and validates a scenario document: exactly one JSON object, white
+    /// space around it allowed, nothing else after it.
     pub fn from_json(json: &str) -> Result<Self, ScenarioError> {
         let de = &mut serde_json::Deserializer::from_str(json);
-        let raw: Object<RawScenario> = serde_path_to_error::deserialize(de).map_err(|e| {
+        let raw: Object<RawScenario> = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
             let mut path = e.path().to_string();
             if inner_is_unknown_field(&e) {
                 // The path ends in the unknown name itself; report its parent.
                 path = path.rsplit_once('.').map(|(parent, _)| parent.to_string()).unwrap_or_default();
             }
-            let inner = e.into_inner();
-            let (line, column) = (inner.line(), inner.column());
-            // serde_json appends " at line L column C"; we print those ourselves.
-            let text = inner.to_string();
-            let message = match text.rfind(" at line ") {
-                Some(i) => text[..i].to_string(),
-                None => text,
-            };
-            ScenarioError::Malformed { path, message: suggest(message), line, column }
+            malformed(path, e.into_inner())
         })?;
+        de.end().map_err(|e| malformed(String::new(), e))?;
         Self::from_raw(raw.0)
     }
 
@@ -533,6 +539,17 @@ mod tests {
         let positional = r#"[[-10, -10, 10, 10], {"elevation": 0.7, "azimuth": 2.1}, [],
             {"mean": [0, 0, 0.3], "cov": [[0.2, 0, 0], [0, 0.1, 0], [0, 0, 0.05]]}]"#;
         assert!(Scenario::from_json(positional).is_err());
+    }
+
+    /// One JSON document: anything but white space after it is an error.
+    #[test]
+    fn trailing_characters_are_rejected() {
+        assert!(Scenario::from_json(&format!("{GOOD} \n\t")).is_ok());
+        for tail in ["x", "{}", ",", "]"] {
+            let err = Scenario::from_json(&format!("{GOOD} {tail}")).unwrap_err();
+            assert!(matches!(err, ScenarioError::Malformed { .. }), "`{tail}` gave `{err}`");
+            assert!(err.to_string().contains("trailing characters"), "{err}");
+        }
     }
 
     #[test]
