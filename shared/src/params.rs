@@ -10,7 +10,7 @@
 //! assert_eq!(bad.validate().unwrap_err().to_string(), "rho_min = 7 must be < rho_max = 6");
 //! ```
 
-use crate::limits::MAX_PERIMETER_POINTS;
+use crate::limits::{MAX_COORDINATE, MAX_PERIMETER_POINTS};
 use crate::math::Vector3;
 use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -122,6 +122,11 @@ fn require(field: &'static str, value: f64, ok: bool, rule: impl Into<String>) -
 
 impl Params {
     /// Checks every range of SPEC §11. The first violation is returned.
+    ///
+    /// SPEC bounds `t_vs` and `rho_max` only by "finite" (and ρ_min < ρ_max); like
+    /// every map coordinate they are kept within ±[`MAX_COORDINATE`] (1e6 m), so no
+    /// derived position or distance can overflow. Any physically meaningful value
+    /// passes.
     pub fn validate(&self) -> Result<(), ParamError> {
         let p = self;
         require("rover_radius", p.rover_radius, p.rover_radius > 0.0, "must be > 0")?;
@@ -135,11 +140,12 @@ impl Params {
         require("z_max", p.z_max, p.z_max > p.z_min, format!("must be > z_min = {}", p.z_min))?;
         require("camera_pitch", p.camera_pitch, p.camera_pitch.abs() <= FRAC_PI_2, "must be in [-π/2, π/2]")?;
         for (i, v) in p.t_vs.iter().enumerate() {
-            require(["t_vs[0]", "t_vs[1]", "t_vs[2]"][i], *v, v.abs() <= 100.0, "must be within ±100 m")?;
+            let field = ["t_vs[0]", "t_vs[1]", "t_vs[2]"][i];
+            require(field, *v, v.abs() <= MAX_COORDINATE, "must be within ±1e6 m")?;
         }
         require("rho_min", p.rho_min, p.rho_min > 0.0, "must be > 0")?;
         require("rho_min", p.rho_min, p.rho_min < p.rho_max, format!("must be < rho_max = {}", p.rho_max))?;
-        require("rho_max", p.rho_max, p.rho_max <= 1.0e4, "must be <= 10000")?;
+        require("rho_max", p.rho_max, p.rho_max <= MAX_COORDINATE, "must be <= 1e6")?;
         require("kappa", p.kappa, p.kappa > 0.0, "must be > 0")?;
         require("lambda", p.lambda, p.lambda >= 0.0, "must be >= 0")?;
         let n = f64::from(p.perimeter_points);
@@ -155,6 +161,23 @@ mod tests {
     #[test]
     fn defaults_are_valid() {
         Params::default().validate().unwrap();
+    }
+
+    /// SPEC §11 gives no upper limit for `t_vs` or `rho_max`: long booms and long
+    /// detection ranges are valid (only the ±1e6 m sanity limit of every coordinate
+    /// applies).
+    #[test]
+    fn long_camera_booms_and_ranges_are_valid() {
+        let d = Params::default();
+        for p in [
+            Params { rho_max: 2.0e4, ..d },
+            Params { rho_min: 500.0, rho_max: 1.0e6, ..d },
+            Params { t_vs: Vector3::new(150.0, -200.0, 1000.0), ..d },
+        ] {
+            assert_eq!(p.validate(), Ok(()), "{p:?}");
+        }
+        assert_eq!(Params { rho_max: 1.1e6, ..d }.validate().unwrap_err().field, "rho_max");
+        assert_eq!(Params { t_vs: Vector3::new(0.0, 0.0, -2e6), ..d }.validate().unwrap_err().field, "t_vs[2]");
     }
 
     #[test]
