@@ -101,6 +101,8 @@ fn invalid_scenarios_exit_2_naming_the_field() {
         ("\"radius\": 0.5", "\"radius\": 0", "obstacles[0].cylinder"),
         ("{\"id\": 2,", "{\"id\": 1,", "duplicate obstacle id 1"),
         ("\"bounds\"", "\"bounds\": [0, 0, 1, 1], \"oops\"", "unknown field `oops`"),
+        ("{\"model\": \"paper\"}", "[]", "params: invalid type: sequence, expected a JSON object"),
+        ("\"params\": {\"model\": \"paper\"}\n}", "\"params\": {}\n} {}", "trailing characters"),
     ];
     for (i, (from, to, needle)) in cases.into_iter().enumerate() {
         let path = scenario_file(&format!("bad_{i}.json"), &edited(from, to));
