@@ -29,6 +29,7 @@ mod client;
 mod error;
 
 pub mod eval;
+pub mod logging;
 pub mod mission;
 pub mod rover;
 pub mod shutdown;

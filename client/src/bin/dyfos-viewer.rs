@@ -121,17 +121,9 @@ fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
     })
 }
 
-fn init_logging() {
-    use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_ansi(ansi).try_init();
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
-}
-
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    init_logging();
+    dyfos_client::logging::init();
     let config = match config(&cli) {
         Ok(c) => c,
         Err(e) => {

@@ -99,13 +99,6 @@ fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
     })
 }
 
-fn init_logging() {
-    use tracing_subscriber::EnvFilter;
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
-}
-
 /// Serves until SIGINT/SIGTERM: answer, keep polling for `config.spin` after the
 /// last request (the next one of a burst then costs no wake-up), then sleep.
 fn serve(mut daemon: Daemon) {
@@ -141,7 +134,7 @@ fn serve(mut daemon: Daemon) {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    init_logging();
+    dyfos_client::logging::init();
     let config = match config(&cli) {
         Ok(c) => c,
         Err(e) => {
