@@ -35,7 +35,7 @@ pub enum SearchError {
     /// No candidate passed the constraints (SPEC §8 `no_feasible_pose`).
     #[error("no_feasible_pose: none of {} candidates was feasible ({} workspace, {} collision, {} occlusion){}",
         stats.total, stats.workspace, stats.collision, stats.occlusion,
-        match stop { StopReason::Deadline => "; the deadline passed first", StopReason::Budget => "; the evaluation budget ran out", _ => "" })]
+        match stop { StopReason::Deadline => "; the deadline passed first", StopReason::Budget => "; the evaluation budget ran out", StopReason::Abandoned => "; the search was abandoned", _ => "" })]
     NoFeasiblePose {
         /// What was tried.
         stats: EvalStats,

@@ -90,6 +90,9 @@ pub enum StopReason {
     Budget,
     /// The request's deadline passed; the answer is the best found so far.
     Deadline,
+    /// Whoever asked no longer wants the answer (the daemon saw the client go away),
+    /// so the search gave up; the daemon sends no reply for it.
+    Abandoned,
 }
 
 /// The optimal sensor state found, with everything SPEC §8 says an answer carries.

@@ -27,6 +27,14 @@
 //! thread-safe iceoryx2 variant, so an accepted request can move to a worker). A
 //! `brute` query may hold at most all workers but one, so a cheap query from another
 //! client always finds a free worker.
+//!
+//! A client that goes away mid-query (killed, or dropping its pending response)
+//! frees its worker: while searches run, the IPC thread looks every
+//! [`CLIENT_CHECK`] whether their clients are still connected and abandons the
+//! search of one that is not (no reply; counted as `queries_abandoned` in the
+//! stats). iceoryx2 sees a killed client as gone only once its resources are
+//! cleaned up: at the daemon's next [`HOUSEKEEPING`], or sooner when any process
+//! of the domain creates a node.
 
 mod map;
 mod rendezvous;
@@ -41,6 +49,7 @@ use dyfos_shared::wire::{DEFAULT_PREFIX, PrefixError, ServiceNames};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::server::Server;
+use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::WaitSetRunResult;
 use std::path::PathBuf;
@@ -59,6 +68,10 @@ type StatsServer = Server<Ipc, StatsRequest, (), StatsReply, ()>;
 
 /// How often the daemon expires idle uploads and cleans up after dead clients.
 pub const HOUSEKEEPING: Duration = Duration::from_secs(5);
+
+/// While searches run, how often the IPC thread checks that their clients are still
+/// there (and so, at most, how long [`Daemon::wait`] sleeps meanwhile).
+pub const CLIENT_CHECK: Duration = Duration::from_millis(10);
 
 /// How the daemon runs. [`DaemonConfig::default`] is what `dyfosd` uses without flags.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -218,6 +231,8 @@ pub(crate) struct Shared {
     pub(crate) reply: Notifier<Ipc>,
     pub(crate) stats: Mutex<stats::Stats>,
     pub(crate) threads: usize,
+    /// One per worker: its running query, watched by the IPC thread.
+    pub(crate) watches: Box<[rendezvous::Watch]>,
     /// Weights of the learned SDSMM, if `--model` was given.
     pub(crate) learned: Option<Arc<dyfos_shared::sdsmm::Learned>>,
 }
@@ -252,6 +267,7 @@ pub struct Daemon {
     workers: Vec<JoinHandle<()>>,
     maps: map::Maps,
     last_housekeeping: Instant,
+    last_client_check: Instant,
     closing: bool,
 }
 
@@ -368,6 +384,7 @@ impl Daemon {
             reply,
             stats: Mutex::new(stats::Stats::new()),
             threads,
+            watches: (0..threads).map(|_| rendezvous::Watch::new()).collect(),
             learned,
         });
         let worker_nice = config.worker_nice.min(19);
@@ -378,7 +395,7 @@ impl Daemon {
                     .name(format!("dyfos-worker-{i}"))
                     .spawn(move || {
                         lower_priority(worker_nice);
-                        rendezvous::worker(&shared)
+                        rendezvous::worker(&shared, i)
                     })
                     .map_err(|e| DaemonCreateError::Ipc(format!("cannot start worker thread: {e}")))
             })
@@ -408,6 +425,7 @@ impl Daemon {
             workers,
             maps,
             last_housekeeping: Instant::now(),
+            last_client_check: Instant::now(),
             closing: false,
         })
     }
@@ -459,7 +477,26 @@ impl Daemon {
         if self.last_housekeeping.elapsed() >= HOUSEKEEPING {
             self.housekeeping();
         }
+        if self.last_client_check.elapsed() >= CLIENT_CHECK {
+            self.check_clients();
+        }
         handled
+    }
+
+    /// Abandons the running searches whose clients have gone.
+    fn check_clients(&mut self) {
+        self.last_client_check = Instant::now();
+        if self.shared.queue.lock().map_or(0, |q| q.running()) == 0 {
+            return;
+        }
+        // Take in the clients that came or went since the last receive (a dead-node
+        // cleanup may just have removed some).
+        if let Err(e) = self.rendezvous.update_connections() {
+            debug!("rendezvous connections updated only in part: {e:?}");
+        }
+        for watch in self.shared.watches.iter() {
+            watch.check();
+        }
     }
 
     fn housekeeping(&mut self) {
@@ -468,6 +505,8 @@ impl Daemon {
         let cleanup = self.node.try_cleanup_dead_nodes();
         if cleanup.cleanups > 0 {
             info!(cleaned = cleanup.cleanups, "removed resources of dead clients");
+            // Their running queries can be abandoned now.
+            self.check_clients();
         }
     }
 
@@ -477,8 +516,12 @@ impl Daemon {
     }
 
     /// Sleeps until a client notifies the wake-up event, `timeout` passes, or a
-    /// termination signal arrives. Uses no CPU while it sleeps.
+    /// termination signal arrives. Uses no CPU while it sleeps. While searches run it
+    /// sleeps at most [`CLIENT_CHECK`], so that [`Daemon::spin`] can see their
+    /// clients go.
     pub fn wait(&mut self, timeout: Duration) -> WaitOutcome {
+        let timeout =
+            if self.shared.queue.lock().map_or(0, |q| q.running()) > 0 { timeout.min(CLIENT_CHECK) } else { timeout };
         // Consume stale notifications first, then look once more: a request sent
         // before its notification was consumed is seen here, one sent after wakes us.
         let _ = self.wake.try_wait(|_| {});

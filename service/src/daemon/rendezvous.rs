@@ -13,9 +13,10 @@ use dyfos_shared::wire::{Rejection, Status, join_u128};
 use dyfos_shared::world::World;
 use iceoryx2::active_request::ActiveRequest;
 use std::collections::VecDeque;
-use std::sync::{Arc, MutexGuard};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
-use tracing::{debug, error, trace};
+use tracing::{debug, error, info, trace};
 
 type RendezvousActive = ActiveRequest<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
 
@@ -27,6 +28,48 @@ pub(crate) struct Job {
     received: Instant,
     reply_to: u128,
     request_id: u64,
+}
+
+/// One worker's running query, as the IPC thread sees it: the worker lends it the
+/// query's request for the time of the search, and the IPC thread raises `abandon`
+/// once that request's client has gone (it died, or dropped its pending response).
+/// `ActiveRequest` is `Send` but not `Sync`, so the search threads cannot ask it
+/// themselves; they read the flag. One per worker, made once: nothing per query.
+pub(crate) struct Watch {
+    running: Mutex<Option<(u64, RendezvousActive)>>,
+    abandon: AtomicBool,
+}
+
+impl Watch {
+    pub(crate) fn new() -> Self {
+        Watch { running: Mutex::new(None), abandon: AtomicBool::new(false) }
+    }
+
+    /// Lends `active` to the IPC thread's watch, with the flag lowered.
+    fn lend(&self, request_id: u64, active: RendezvousActive) {
+        let mut running = lock(&self.running);
+        self.abandon.store(false, Ordering::Relaxed);
+        *running = Some((request_id, active));
+    }
+
+    /// Takes the lent request back.
+    fn take_back(&self) -> Option<RendezvousActive> {
+        lock(&self.running).take().map(|(_, active)| active)
+    }
+
+    /// On the IPC thread: raises the flag if the lent request's client has gone.
+    pub(crate) fn check(&self) {
+        let running = lock(&self.running);
+        if let Some((request_id, active)) = running.as_ref()
+            && !self.abandon.load(Ordering::Relaxed)
+            && !active.is_connected()
+        {
+            // Raised under the lock: the worker's next `lend` cannot lower it before
+            // this request is taken back.
+            self.abandon.store(true, Ordering::Relaxed);
+            debug!(request_id, "the client of a running query has gone; abandoning the search");
+        }
+    }
 }
 
 /// The queries waiting for workers, in two classes: `brute` (heavy) may occupy
@@ -113,8 +156,10 @@ fn lock<T>(m: &std::sync::Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
-/// A worker thread: takes jobs until the queue is closed.
-pub(crate) fn worker(shared: &Shared) {
+/// A worker thread: takes jobs until the queue is closed. `index` names its
+/// [`Watch`] in `shared.watches`.
+pub(crate) fn worker(shared: &Shared, index: usize) {
+    let watch = &shared.watches[index];
     loop {
         let (job, heavy) = {
             let mut q = lock(&shared.queue);
@@ -131,7 +176,7 @@ pub(crate) fn worker(shared: &Shared) {
         // A bug in a search must not take the worker (and the shutdown's count of
         // queries in flight) with it; `run` answers `internal_error` for a panic in
         // the search itself, this catches the rest.
-        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(shared, job))).is_err() {
+        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(shared, watch, job))).is_err() {
             error!("a search panicked; its query was dropped");
         }
         lock(&shared.queue).finish(heavy);
@@ -140,15 +185,19 @@ pub(crate) fn worker(shared: &Shared) {
     }
 }
 
-fn run(shared: &Shared, job: Job) {
+/// Searches for `job` and replies, unless its client goes away first: a client that
+/// left before the search started is skipped, one that leaves during it (seen by the
+/// IPC thread through `watch`) abandons the search. Neither gets a reply, as nobody
+/// is there to receive it; an abandoned search is counted in the stats.
+fn run(shared: &Shared, watch: &Watch, job: Job) {
     let Job { active, request, world, received, reply_to, request_id } = job;
     let deadline = request.deadline.map(|d| received + d);
     if !active.is_connected() {
         debug!(request_id, "client left before its query started; skipped");
         return;
     }
-    let mut reply = if deadline.is_some_and(|d| Instant::now() >= d) {
-        RendezvousReply::rejected(
+    let (mut reply, active) = if deadline.is_some_and(|d| Instant::now() >= d) {
+        let reply = RendezvousReply::rejected(
             request_id,
             &Rejection::new(
                 Status::DeadlineExceeded,
@@ -157,25 +206,48 @@ fn run(shared: &Shared, job: Job) {
                     request.deadline.unwrap_or_default()
                 ),
             ),
-        )
+        );
+        (reply, active)
     } else {
+        watch.lend(request_id, active);
         let searched = guarded("rendezvous", || {
             let model = NoiseModel::from_params_and_weights(&request.params, shared.learned.as_ref())
                 .map_err(|e| Rejection::new(Status::UnsupportedModel, e.to_string()))?;
-            let control =
-                SearchControl { seed: request.seed, budget: request.budget, deadline, threads: shared.threads };
-            solve(&world, &request.belief, &request.params, &model, request.algorithm, &control).map_err(
-                |e @ SearchError::NoFeasiblePose { stop, .. }| {
-                    let status =
-                        if stop == StopReason::Deadline { Status::DeadlineExceeded } else { Status::NoFeasiblePose };
-                    Rejection::new(status, e.to_string())
-                },
-            )
+            let control = SearchControl {
+                seed: request.seed,
+                budget: request.budget,
+                deadline,
+                threads: shared.threads,
+                abandon: Some(&watch.abandon),
+            };
+            Ok(solve(&world, &request.belief, &request.params, &model, request.algorithm, &control))
         });
-        match searched {
+        let Some(active) = watch.take_back() else {
+            error!(request_id, "a running query's request went missing; it gets no reply");
+            return;
+        };
+        let stop = match &searched {
+            Ok(Ok(answer)) => Some(answer.stop),
+            Ok(Err(SearchError::NoFeasiblePose { stop, .. })) => Some(*stop),
+            Err(_) => None,
+        };
+        if stop == Some(StopReason::Abandoned) {
+            lock(&shared.stats).abandoned();
+            let micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
+            info!(request_id, micros, algorithm = request.algorithm.name(), "query abandoned: its client has gone");
+            return;
+        }
+        let reply = match searched.and_then(|solved| {
+            solved.map_err(|e @ SearchError::NoFeasiblePose { stop, .. }| {
+                let status =
+                    if stop == StopReason::Deadline { Status::DeadlineExceeded } else { Status::NoFeasiblePose };
+                Rejection::new(status, e.to_string())
+            })
+        }) {
             Ok(answer) => RendezvousReply::answer(request_id, &answer),
             Err(rejection) => RendezvousReply::rejected(request_id, &rejection),
-        }
+        };
+        (reply, active)
     };
     let micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
     reply.daemon_micros = micros;

@@ -12,6 +12,7 @@ const WINDOW: usize = 4096;
 pub(crate) struct Stats {
     started: std::time::Instant,
     queries_served: u64,
+    queries_abandoned: u64,
     requests_failed: u64,
     map_requests: u64,
     errors: [u64; STATUS_SLOTS],
@@ -24,6 +25,7 @@ impl Stats {
         Stats {
             started: std::time::Instant::now(),
             queries_served: 0,
+            queries_abandoned: 0,
             requests_failed: 0,
             map_requests: 0,
             errors: [0; STATUS_SLOTS],
@@ -41,6 +43,11 @@ impl Stats {
             self.latencies[self.next] = micros;
         }
         self.next = (self.next + 1) % WINDOW;
+    }
+
+    /// A query whose search was abandoned because its client had gone (no reply).
+    pub(crate) fn abandoned(&mut self) {
+        self.queries_abandoned += 1;
     }
 
     /// A request answered with an error.
@@ -86,6 +93,7 @@ pub(super) fn on_request(
             latency_micros: s.percentiles(),
             latency_samples: s.latencies.len() as u64,
             errors_by_code: s.errors,
+            queries_abandoned: s.queries_abandoned,
         },
         Err(_) => StatsReply { request_id: request.request_id, ..StatsReply::default() },
     };

@@ -94,7 +94,10 @@ impl Search for Brute {
         let mut stop = if n < self.len() { StopReason::Budget } else { StopReason::Finished };
         for (s, stopped) in parts {
             stats += s;
-            if let Some(reason) = stopped {
+            // One abandoning thread abandons the whole search.
+            if let Some(reason) = stopped
+                && stop != StopReason::Abandoned
+            {
                 stop = reason;
             }
         }

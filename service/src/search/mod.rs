@@ -3,7 +3,8 @@
 //! A [`Search`] proposes candidates, the [`Lupp`] scores each one, and an
 //! [`Evaluator`] counts them against the request's budget and deadline — the split
 //! ripgrep makes between its searcher, matcher and sink. A new algorithm only adds
-//! a file here.
+//! a file here. Whoever asked can abandon a search midway through
+//! [`SearchControl::abandon`] (the daemon does when the client goes away).
 //!
 //! ```
 //! use dyfos_service::lupp::Lupp;
@@ -30,11 +31,12 @@ pub use sampling::{CenterView, RandomSampling};
 use crate::lupp::{Evaluation, Lupp};
 use dyfos_shared::answer::{Algorithm, EvalStats, StopReason};
 use dyfos_shared::sensor::SensorState;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// How far a search may go, and its random stream.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct SearchControl {
+#[derive(Debug, Clone, Copy)]
+pub struct SearchControl<'c> {
     /// Seed of the ChaCha stream: the same seed gives the same answer, bit for bit.
     pub seed: u64,
     /// Most candidates to evaluate; `None` for the algorithm's own limits.
@@ -43,13 +45,18 @@ pub struct SearchControl {
     pub deadline: Option<Instant>,
     /// Worker threads for parallel algorithms (`brute`); the answer does not depend on it.
     pub threads: usize,
+    /// Raised (by another thread) when nobody wants the answer any more: the search
+    /// then stops as soon as it looks, with [`StopReason::Abandoned`]. Every search
+    /// thread looks with the deadline, every [`Evaluator::CLOCK_EVERY`] evaluations.
+    /// A flag never raised changes nothing, bit for bit.
+    pub abandon: Option<&'c AtomicBool>,
 }
 
-impl SearchControl {
-    /// Seed `seed`, no budget, no deadline, all cores.
+impl SearchControl<'static> {
+    /// Seed `seed`, no budget, no deadline, all cores, nobody to abandon it.
     pub fn seeded(seed: u64) -> Self {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        SearchControl { seed, budget: None, deadline: None, threads }
+        SearchControl { seed, budget: None, deadline: None, threads, abandon: None }
     }
 }
 
@@ -117,36 +124,40 @@ impl Search for AnySearch {
 }
 
 /// Evaluates candidates for one search thread, counting them and enforcing the
-/// budget and deadline. The deadline is read every [`Evaluator::CLOCK_EVERY`]
-/// evaluations, so checking it costs nothing measurable.
+/// budget, deadline and abandonment. The deadline and the abandon flag are read
+/// every [`Evaluator::CLOCK_EVERY`] evaluations, so checking them costs nothing
+/// measurable.
 pub struct Evaluator<'l, 'a> {
     lupp: &'l Lupp<'a>,
     /// Counts so far.
     pub stats: EvalStats,
     budget: u64,
     deadline: Option<Instant>,
+    abandon: Option<&'l AtomicBool>,
     stopped: Option<StopReason>,
     best: Option<Found>,
 }
 
 impl<'l, 'a> Evaluator<'l, 'a> {
-    /// Evaluations between deadline checks.
+    /// Evaluations between deadline (and abandon flag) checks.
     pub const CLOCK_EVERY: u64 = 64;
 
-    /// A fresh evaluator under `control`'s budget and deadline.
-    pub fn new(lupp: &'l Lupp<'a>, control: &SearchControl) -> Self {
+    /// A fresh evaluator under `control`'s budget, deadline and abandon flag.
+    pub fn new(lupp: &'l Lupp<'a>, control: &SearchControl<'l>) -> Self {
         Evaluator {
             lupp,
             stats: EvalStats::default(),
             budget: control.budget.unwrap_or(u64::MAX),
             deadline: control.deadline,
+            abandon: control.abandon,
             stopped: None,
             best: None,
         }
     }
 
-    /// Evaluates `x`, or returns `None` once the budget or deadline is spent.
-    /// Keeps the best feasible candidate seen (first of equal costs).
+    /// Evaluates `x`, or returns `None` once the budget or deadline is spent or
+    /// the search is abandoned. Keeps the best feasible candidate seen (first of
+    /// equal costs).
     #[inline]
     pub fn evaluate(&mut self, x: &SensorState) -> Option<Evaluation> {
         if self.stopped.is_some() {
@@ -156,9 +167,16 @@ impl<'l, 'a> Evaluator<'l, 'a> {
             self.stopped = Some(StopReason::Budget);
             return None;
         }
-        if self.stats.total.is_multiple_of(Self::CLOCK_EVERY) && self.deadline.is_some_and(|d| Instant::now() >= d) {
-            self.stopped = Some(StopReason::Deadline);
-            return None;
+        if self.stats.total.is_multiple_of(Self::CLOCK_EVERY) {
+            // Relaxed: the flag orders nothing else; a raise is seen at a later look.
+            if self.abandon.is_some_and(|a| a.load(Ordering::Relaxed)) {
+                self.stopped = Some(StopReason::Abandoned);
+                return None;
+            }
+            if self.deadline.is_some_and(|d| Instant::now() >= d) {
+                self.stopped = Some(StopReason::Deadline);
+                return None;
+            }
         }
         let e = self.lupp.evaluate(x);
         e.count(&mut self.stats);
@@ -175,7 +193,7 @@ impl<'l, 'a> Evaluator<'l, 'a> {
         self.stopped
     }
 
-    /// The outcome, with `stop` unless the budget or deadline cut it short.
+    /// The outcome, with `stop` unless the budget, deadline or abandonment cut it short.
     pub fn finish(self, stop: StopReason) -> SearchOutcome {
         SearchOutcome { best: self.best, stats: self.stats, stop: self.stopped.unwrap_or(stop) }
     }

@@ -3,6 +3,7 @@
 
 use super::*;
 use dyfos_shared::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 fn example() -> Scenario {
     Scenario::from_json(include_str!("../../../tests/data/example.json")).unwrap()
@@ -148,5 +149,71 @@ fn adaptive_polish_reaches_the_image_centre_and_improves_on_scipy() {
         assert_eq!((dyfos.x.psi, dyfos.x.phi), (0.0, 0.0), "seed {seed}: {dyfos:?}");
         assert!(dyfos.cost < scipy.cost - 0.01, "seed {seed}: {} vs SciPy's {}", dyfos.cost, scipy.cost);
         assert!(dyfos.cost <= compass.cost, "seed {seed}: {} vs compass {}", dyfos.cost, compass.cost);
+    }
+}
+
+#[test]
+fn a_raised_abandon_flag_stops_every_algorithm_at_once() {
+    let s = example();
+    let model = NoiseModel::from_params(&s.params).unwrap();
+    let lupp = Lupp::new(&s.world, &s.belief, &s.params, &model);
+    let raised = AtomicBool::new(true);
+    for algo in algorithms() {
+        for threads in [1, 3] {
+            let control = SearchControl { abandon: Some(&raised), threads, ..SearchControl::seeded(3) };
+            let out = algo.search(&lupp, &control);
+            assert_eq!(out.stop, StopReason::Abandoned, "{algo:?}, {threads} threads");
+            assert_eq!(out.stats.total, 0, "{algo:?}, {threads} threads");
+            assert!(out.best.is_none());
+        }
+    }
+    // Abandonment wins over a deadline that passed too.
+    let past = std::time::Instant::now();
+    let control = SearchControl { abandon: Some(&raised), deadline: Some(past), ..SearchControl::seeded(3) };
+    assert_eq!(DifferentialEvolution::dyfos().search(&lupp, &control).stop, StopReason::Abandoned);
+}
+
+#[test]
+fn the_abandon_flag_is_read_with_the_clock() {
+    let s = example();
+    let model = NoiseModel::from_params(&s.params).unwrap();
+    let lupp = Lupp::new(&s.world, &s.belief, &s.params, &model);
+    let flag = AtomicBool::new(false);
+    let control = SearchControl { abandon: Some(&flag), ..SearchControl::seeded(0) };
+    let mut eval = Evaluator::new(&lupp, &control);
+    let x = SensorState::new(8.0, 0.0, 0.0, 0.0);
+    for _ in 0..100 {
+        assert!(eval.evaluate(&x).is_some());
+    }
+    // Raised mid-search (by another thread, in the daemon): the evaluations up to
+    // the next look still run, none after it.
+    flag.store(true, Ordering::Relaxed);
+    let mut more = 0;
+    while eval.evaluate(&x).is_some() {
+        more += 1;
+    }
+    assert_eq!(100 + more, 2 * Evaluator::CLOCK_EVERY);
+    assert_eq!(eval.stopped(), Some(StopReason::Abandoned));
+    assert!(eval.evaluate(&x).is_none(), "an abandoned evaluator stays stopped");
+    let out = eval.finish(StopReason::Finished);
+    assert_eq!((out.stop, out.stats.total), (StopReason::Abandoned, 2 * Evaluator::CLOCK_EVERY));
+}
+
+#[test]
+fn an_abandon_flag_never_raised_changes_nothing() {
+    let s = example();
+    let model = NoiseModel::from_params(&s.params).unwrap();
+    let lupp = Lupp::new(&s.world, &s.belief, &s.params, &model);
+    let lowered = AtomicBool::new(false);
+    for algo in algorithms() {
+        for threads in [1, 2, 3] {
+            for seed in [0, 5] {
+                let plain = SearchControl { threads, ..SearchControl::seeded(seed) };
+                let watched = SearchControl { abandon: Some(&lowered), ..plain };
+                let (a, b) = (algo.search(&lupp, &plain), algo.search(&lupp, &watched));
+                let bits = |o: &SearchOutcome| o.best.map(|b| (b.x.to_array().map(f64::to_bits), b.cost.to_bits()));
+                assert_eq!((bits(&a), a.stats, a.stop), (bits(&b), b.stats, b.stop), "{algo:?}, {threads} threads");
+            }
+        }
     }
 }

@@ -322,7 +322,8 @@ pub struct RendezvousReply {
     pub status: u32,
     /// [`Algorithm::ALL`] index of the algorithm used.
     pub algorithm: u32,
-    /// Why the search stopped: 0 finished, 1 max generations, 2 budget, 3 deadline.
+    /// Why the search stopped: 0 finished, 1 max generations, 2 budget, 3 deadline,
+    /// 4 abandoned (never sent by `dyfosd`, which does not reply to a client that left).
     pub stop: u32,
     /// 0 solve, 1 check.
     pub mode: u32,
@@ -364,6 +365,7 @@ fn stop_code(s: StopReason) -> u32 {
         StopReason::MaxGenerations => 1,
         StopReason::Budget => 2,
         StopReason::Deadline => 3,
+        StopReason::Abandoned => 4,
     }
 }
 
@@ -440,6 +442,7 @@ impl RendezvousReply {
             1 => StopReason::MaxGenerations,
             2 => StopReason::Budget,
             3 => StopReason::Deadline,
+            4 => StopReason::Abandoned,
             s => return Err(bad(format!("stop = {s}"))),
         };
         let [i, j, k, w] = self.sensor_quaternion;
@@ -537,7 +540,8 @@ mod tests {
         let ok = RendezvousReply { stop: 3, algorithm: 2, ..RendezvousReply::checked(1, 4) };
         let answer = ok.decode_answer().unwrap();
         assert_eq!((answer.algorithm, answer.stop), (Algorithm::Brute, StopReason::Deadline));
-        assert!(RendezvousReply { stop: 4, ..ok }.decode_answer().is_err());
+        assert_eq!(RendezvousReply { stop: 4, ..ok }.decode_answer().unwrap().stop, StopReason::Abandoned);
+        assert!(RendezvousReply { stop: 5, ..ok }.decode_answer().is_err());
         assert!(RendezvousReply { algorithm: 99, ..ok }.decode_answer().is_err());
         let unknown = RendezvousReply { status: 999, ..ok }.decode_answer().unwrap_err();
         assert_eq!(unknown.status, Status::MalformedRequest);

@@ -1,5 +1,5 @@
 //! The health and statistics service (`<prefix>stats`): liveness, uptime, queries
-//! served, errors by code and latency percentiles.
+//! served and abandoned, errors by code and latency percentiles.
 //!
 //! ```
 //! use dyfos_shared::wire::stats::{DaemonStats, StatsReply};
@@ -62,6 +62,10 @@ pub struct StatsReply {
     pub latency_samples: u64,
     /// Error replies by [`Status`] code.
     pub errors_by_code: [u64; STATUS_SLOTS],
+    /// Queries whose search was abandoned because their client went away (killed,
+    /// or dropped its pending response) before the answer; they got no reply.
+    /// Last, so the fields before keep their offsets.
+    pub queries_abandoned: u64,
 }
 
 impl Default for StatsReply {
@@ -80,6 +84,7 @@ impl Default for StatsReply {
             latency_micros: [0; 4],
             latency_samples: 0,
             errors_by_code: [0; STATUS_SLOTS],
+            queries_abandoned: 0,
         }
     }
 }
@@ -93,6 +98,8 @@ pub struct DaemonStats {
     pub uptime: std::time::Duration,
     /// Rendezvous queries answered with a pose.
     pub queries_served: u64,
+    /// Queries abandoned because their client went away mid-search (no reply).
+    pub queries_abandoned: u64,
     /// Requests answered with an error.
     pub requests_failed: u64,
     /// Successful map requests.
@@ -126,6 +133,7 @@ impl From<&StatsReply> for DaemonStats {
             pid: r.pid,
             uptime: std::time::Duration::from_micros(r.uptime_micros),
             queries_served: r.queries_served,
+            queries_abandoned: r.queries_abandoned,
             requests_failed: r.requests_failed,
             map_requests: r.map_requests,
             maps: r.maps,
@@ -149,6 +157,7 @@ impl DaemonStats {
             "pid": self.pid,
             "uptime_s": self.uptime.as_secs_f64(),
             "queries_served": self.queries_served,
+            "queries_abandoned": self.queries_abandoned,
             "requests_failed": self.requests_failed,
             "map_requests": self.map_requests,
             "maps": self.maps,

@@ -1,0 +1,119 @@
+//! A client that goes away mid-query frees its worker: `dyfosd` abandons the
+//! search (no reply, nobody to read it) and counts it in `queries_abandoned`.
+//!
+//! The doomed query is a `brute` search over a map whose voxel grid spans the
+//! whole search space at 5 cm (two occupied cells at opposite corners), so every
+//! sight line walks hundreds of cells: seconds of search on two threads, where the
+//! daemon notices a gone client within milliseconds. Nothing here times anything:
+//! the assertions are on the daemon's counters, polled with [`wait_for`].
+
+use dyfos_client::prelude::*;
+use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, bin, data, signal, wait_for};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+const SCENARIO: &str = "golden/scenarios/hard/hard_01.json";
+
+fn scenario() -> Scenario {
+    Scenario::from_json(&std::fs::read_to_string(data(SCENARIO)).unwrap()).unwrap()
+}
+
+/// `hard_01`'s world with a fine voxel grid over the whole search space.
+fn slow_world() -> World {
+    let resolution = 0.05;
+    let (cells_xy, cells_z) = ((24.0 / resolution) as i64, (12.0 / resolution) as i64);
+    let voxels = MapDelta::SetVoxels {
+        resolution,
+        origin: na::Point3::new(-12.0, -12.0, 0.0),
+        cells: vec![[0, 0, 0], [cells_xy - 1, cells_xy - 1, cells_z - 1]],
+        occupied: true,
+    };
+    scenario().world.apply(&[voxels]).unwrap()
+}
+
+/// A daemon with two workers (so one `brute` query may run at a time) and
+/// `slow_world` as map 1.
+fn start(sandbox: &Sandbox) -> (dyfos_tests::DaemonProcess, Client) {
+    let daemon = sandbox.start_daemon(&["--workers", "2"]);
+    let mut admin = sandbox.client();
+    admin.upload_map(1, &slow_world(), false, PATIENCE).unwrap();
+    (daemon, admin)
+}
+
+fn brute(budget: Option<u64>) -> RendezvousRequest {
+    let s = scenario();
+    RendezvousRequest { algorithm: Algorithm::Brute, budget, params: s.params, ..RendezvousRequest::new(1, s.belief) }
+}
+
+/// A file removed when dropped.
+struct TempFile(std::path::PathBuf);
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+fn abandoned(admin: &mut Client) -> u64 {
+    admin.stats(PATIENCE).unwrap().queries_abandoned
+}
+
+#[test]
+fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
+    let sandbox = Sandbox::new("abandon-kill");
+    let (daemon, mut admin) = start(&sandbox);
+    // `dyfos query` uploads the scenario's world itself, under an id of its own.
+    let file = TempFile(sandbox.state_dir.with_extension("slow.json"));
+    std::fs::write(&file.0, Scenario { world: slow_world(), ..scenario() }.to_json()).unwrap();
+    let child = Command::new(bin("dyfos"))
+        .arg("query")
+        .arg(&file.0)
+        .args(["--algo", "brute"])
+        .args(sandbox.dyfos_flags())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut child = ChildGuard(child);
+    wait_for("the doomed brute query to run", || (admin.stats(PATIENCE).unwrap().running == 1).then_some(()));
+    assert_eq!(abandoned(&mut admin), 0, "a search whose client is there goes on");
+    signal(child.0.id(), "KILL");
+    let _ = child.0.wait();
+
+    // iceoryx2 sees the killed client gone once its node is cleaned up: by the
+    // daemon's housekeeping, or at once when a process of the domain creates a
+    // node, as this new client does.
+    let mut next = sandbox.client();
+    wait_for("the orphaned search to be abandoned", || (abandoned(&mut admin) == 1).then_some(()));
+    wait_for("its worker to be free", || (admin.stats(PATIENCE).unwrap().running == 0).then_some(()));
+
+    // Two workers take one brute query at a time: this one runs on the freed slot.
+    let answer = next.rendezvous(&brute(Some(2_000)), PATIENCE).expect("the next client is answered");
+    assert_eq!(answer.evaluations.total, 2_000);
+    let stats = admin.stats(PATIENCE).unwrap();
+    assert_eq!((stats.queries_abandoned, stats.queries_served, stats.requests_failed), (1, 1, 0), "{stats:?}");
+    let log = daemon.log();
+    assert!(log.contains("query abandoned: its client has gone"), "{log}");
+
+    // `dyfos stats` shows the counter.
+    let out = Command::new(bin("dyfos")).arg("stats").args(sandbox.dyfos_flags()).output().unwrap();
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stats JSON");
+    assert_eq!(json["queries_abandoned"], 1, "{json}");
+}
+
+#[test]
+fn a_client_that_stops_waiting_abandons_its_query() {
+    let sandbox = Sandbox::new("abandon-timeout");
+    let (_daemon, mut admin) = start(&sandbox);
+    let mut impatient = sandbox.client();
+    // The client gives up long before the search could end and drops its pending
+    // response; no dead-node cleanup is needed to see that.
+    let err = impatient.rendezvous(&brute(None), Duration::from_millis(200)).unwrap_err();
+    assert!(matches!(err, RendezvousError::Timeout(_)), "{err}");
+    wait_for("the search to be abandoned", || (abandoned(&mut admin) == 1).then_some(()));
+    wait_for("its worker to be free", || (admin.stats(PATIENCE).unwrap().running == 0).then_some(()));
+    // The same client is answered next, on the freed worker.
+    let answer = impatient.rendezvous(&brute(Some(500)), PATIENCE).expect("answered after giving up once");
+    assert_eq!(answer.evaluations.total, 500);
+    assert_eq!(admin.stats(PATIENCE).unwrap().queries_served, 1);
+}
