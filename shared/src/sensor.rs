@@ -18,8 +18,9 @@
 //! assert!(((pose.position - target).norm() - 2.0).abs() < 1e-12);
 //! ```
 
-use crate::math::{Matrix3, Point3, Rotation3, UnitQuaternion, Vector3, rot_y, rot_z, wrap_angle};
+use crate::math::{Matrix3, Point3, Rotation3, UnitQuaternion, Vector3, canonical_xyzw, rot_y, rot_z, wrap_angle};
 use crate::params::Params;
+use nalgebra::Quaternion;
 use std::f64::consts::PI;
 
 /// A candidate sensor state `x = (ρ, ψ, φ, ψ_v)` (SPEC §4).
@@ -98,9 +99,14 @@ pub struct SensorPose {
 }
 
 impl SensorPose {
-    /// The sensor orientation as a unit quaternion.
+    /// The sensor orientation as a unit quaternion in SPEC §3's sign: w ≥ 0, and
+    /// where w = 0 the first non-zero of x, y, z positive. nalgebra's conversion
+    /// gives w < 0 for some yaws; carrying the sign here means every place that
+    /// writes the quaternion (JSON answers, wire replies) writes the same numbers.
     pub fn quaternion(&self) -> UnitQuaternion<f64> {
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(self.rotation))
+        let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(self.rotation));
+        let [x, y, z, w] = canonical_xyzw(&q);
+        UnitQuaternion::new_unchecked(Quaternion::new(w, x, y, z))
     }
 
     /// The point `p` in the sensor frame: `R_wsᵀ (p − p_s)`.
@@ -170,6 +176,23 @@ mod tests {
             assert!((q.z.atan2(q.x) - x.phi).abs() < 1e-12);
             let back = rig.pose_of_viewer(&pose.viewer_position, pose.viewer_yaw);
             assert!((back.position - pose.position).norm() < 1e-12);
+        }
+    }
+
+    /// SPEC §3: quaternions are written with w ≥ 0. The orientation itself carries
+    /// that sign, so the wire reply (which copies it) agrees with the JSON answer.
+    #[test]
+    fn orientation_quaternion_has_the_spec_sign() {
+        for pitch in [-1.2, 0.0, 0.6, std::f64::consts::FRAC_PI_2] {
+            let rig = SensorRig::new(&Params { camera_pitch: pitch, ..Params::default() });
+            for k in 0..72 {
+                let yaw = -PI + 2.0 * PI * f64::from(k) / 72.0;
+                let pose = rig.pose_of_viewer(&Point3::new(1.0, 2.0, 3.0), yaw);
+                let q = pose.quaternion();
+                assert!(q.w >= 0.0, "pitch {pitch}, yaw {yaw}: {q:?}");
+                assert!((q.to_rotation_matrix().matrix() - pose.rotation).norm() < 1e-14);
+                assert_eq!(crate::math::canonical_xyzw(&q), [q.i, q.j, q.k, q.w].map(|v| v + 0.0));
+            }
         }
     }
 
