@@ -180,7 +180,10 @@ impl<'l, 'a> Evaluator<'l, 'a> {
         }
         let e = self.lupp.evaluate(x);
         e.count(&mut self.stats);
+        // A NaN cost (no valid model should give one) must not become a best that
+        // nothing can beat.
         if let Some(cost) = e.cost()
+            && !cost.is_nan()
             && self.best.is_none_or(|b| cost < b.cost)
         {
             self.best = Some(Found { x: *x, cost });

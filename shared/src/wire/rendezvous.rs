@@ -337,7 +337,7 @@ pub struct RendezvousReply {
     pub cost: f64,
     /// p_s.
     pub sensor_position: [f64; 3],
-    /// R_ws as a quaternion (x, y, z, w), as computed (not sign-canonicalised).
+    /// R_ws as a quaternion (x, y, z, w), w ≥ 0 (SPEC §3).
     pub sensor_quaternion: [f64; 4],
     /// p_v.
     pub viewer_position: [f64; 3],
