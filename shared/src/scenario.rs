@@ -79,9 +79,10 @@ impl ScenarioError {
 /// A record that must be written as a JSON object (SPEC §11). serde's derived
 /// structs also accept their fields in order as a JSON array (`"sun": [0.7, 2.1]`);
 /// this wrapper asks the parser for an object only, so an array, like `null`, is
-/// "invalid type: sequence, expected a JSON object".
+/// "invalid type: sequence, expected a JSON object". Other documents built on
+/// scenarios (the mission files of `dyfos-rover`) use it for their records too.
 #[derive(Debug)]
-struct Object<T>(T);
+pub struct Object<T>(pub T);
 
 impl<'de, T: Deserialize<'de>> Deserialize<'de> for Object<T> {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {

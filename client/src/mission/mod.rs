@@ -55,7 +55,7 @@ use crate::sim::OdometryNoise;
 use dyfos_shared::math::{Point2, wrap_angle};
 use dyfos_shared::params::Params;
 use dyfos_shared::posterior::Belief;
-use dyfos_shared::scenario::{Scenario, ScenarioError};
+use dyfos_shared::scenario::{Object, Scenario, ScenarioError};
 use dyfos_shared::world::{Bounds, Obstacle, Sun, VerticalCylinder, World};
 use serde::{Deserialize, Serialize};
 
@@ -117,7 +117,7 @@ struct RawMission {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     viewer_start: Option<[f64; 4]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    odometry: Option<OdometryNoise>,
+    odometry: Option<Object<OdometryNoise>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     sun_azimuth_rate: Option<f64>,
 }
@@ -204,11 +204,15 @@ impl Mission {
     /// Reads and validates a mission document (format in the module docs).
     pub fn from_json(json: &str) -> Result<Self, MissionParseError> {
         let de = &mut serde_json::Deserializer::from_str(json);
-        let raw: RawMission = serde_path_to_error::deserialize(de).map_err(|e| {
-            let path = e.path().to_string();
+        let malformed = |path: String, message: String| {
             let path = if path.is_empty() || path == "." { String::new() } else { format!("{path}: ") };
-            MissionParseError::Malformed { path, message: e.into_inner().to_string() }
-        })?;
+            MissionParseError::Malformed { path, message }
+        };
+        // Records as JSON objects only, and nothing after the document, as for scenarios.
+        let raw: Object<RawMission> = serde_path_to_error::deserialize(&mut *de)
+            .map_err(|e| malformed(e.path().to_string(), e.into_inner().to_string()))?;
+        de.end().map_err(|e| malformed(String::new(), e.to_string()))?;
+        let raw = raw.0;
         let scenario = Scenario::from_json(&raw.scenario.to_string()).map_err(MissionParseError::Scenario)?;
         let invalid = |path: String, message: String| MissionParseError::Invalid { path, message };
         if raw.waypoints.is_empty() || raw.waypoints.len() > MAX_WAYPOINTS {
@@ -236,7 +240,7 @@ impl Mission {
         {
             return Err(invalid("viewer_start".into(), format!("= {v:?} must be finite and inside the bounds")));
         }
-        let odometry = raw.odometry.unwrap_or_default();
+        let odometry = raw.odometry.map(|o| o.0).unwrap_or_default();
         odometry.validate().map_err(|m| invalid("odometry".into(), m.trim_start_matches("odometry.").to_string()))?;
         let sun_azimuth_rate = raw.sun_azimuth_rate.unwrap_or(0.0);
         if !(sun_azimuth_rate.is_finite() && sun_azimuth_rate.abs() <= 1.0) {
@@ -272,7 +276,7 @@ impl Mission {
                 self.viewer_start.0[2],
                 self.viewer_start.1,
             ]),
-            odometry: Some(self.odometry),
+            odometry: Some(Object(self.odometry)),
             sun_azimuth_rate: (self.sun_azimuth_rate != 0.0).then_some(self.sun_azimuth_rate),
         };
         serde_json::to_string_pretty(&raw).expect("mission serializes")
@@ -365,6 +369,25 @@ mod tests {
         ];
         for (text, expected) in cases {
             assert!(text != good, "edit for `{expected}` did not apply");
+            let err = Mission::from_json(&text).unwrap_err().to_string();
+            assert!(err.contains(expected), "`{err}` should mention `{expected}`");
+        }
+    }
+
+    #[test]
+    fn records_are_objects_and_nothing_follows_the_document() {
+        let good = Mission::builtin().to_json();
+        assert!(Mission::from_json(&good).is_ok());
+        // serde would take the odometry's fields in order from an array.
+        let mut doc: serde_json::Value = serde_json::from_str(&good).unwrap();
+        let fields: Vec<serde_json::Value> = doc["odometry"].as_object().unwrap().values().cloned().collect();
+        doc["odometry"] = serde_json::Value::Array(fields);
+        let cases = [
+            (doc.to_string(), "odometry: invalid type: sequence, expected a JSON object"),
+            (format!("{good} x"), "trailing characters"),
+            ("[]".to_string(), "invalid type: sequence, expected a JSON object"),
+        ];
+        for (text, expected) in cases {
             let err = Mission::from_json(&text).unwrap_err().to_string();
             assert!(err.contains(expected), "`{err}` should mention `{expected}`");
         }
