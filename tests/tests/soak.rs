@@ -536,6 +536,8 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
         "daemon": {
             "queries_served": sum_stats(|s| s.queries_served),
             "map_requests": sum_stats(|s| s.map_requests),
+            // Searches of clients killed mid-request that the daemon stopped.
+            "queries_abandoned": sum_stats(|s| s.queries_abandoned),
             "errors_by_code": daemon_errors,
             "rss_max_kib": rss_max,
             "shm_segments": {"settled": settle, "max": shm_max},
