@@ -166,6 +166,19 @@ pub fn run(args: &LearnedArgs) -> anyhow::Result<()> {
                     run.true_costs[p][c].iter().filter(|v| v.is_none()).count()
                 );
             }
+            // Per map, so a gap can be traced to its map (`numerical --write-maps`).
+            let _ = writeln!(
+                report,
+                "\nPer map: true E of the pose planned with the truth, and each model's gap to it\n\n| map | true-planned E | {} |\n|---:|---:|{}",
+                run.planners[1..].join(" | "),
+                "---:|".repeat(run.planners.len() - 1)
+            );
+            let per_planner: Vec<Vec<Option<f64>>> = (1..run.planners.len()).map(|p| run.gaps(p, 0, c)).collect();
+            for (m, truth_cost) in run.true_costs[0][c].iter().enumerate() {
+                let gaps: Vec<String> =
+                    per_planner.iter().map(|g| g[m].map_or("–".into(), |g| format!("{g:+.3}"))).collect();
+                let _ = writeln!(report, "| {m} | {} | {} |", f(*truth_cost), gaps.join(" | "));
+            }
             let _ = writeln!(
                 report,
                 "\nMedian query time (`{}`, {} thread{}):",
