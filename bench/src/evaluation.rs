@@ -185,6 +185,39 @@ pub fn evaluate_with(
     }
 }
 
+/// Run-time statistics over one contender's queries: wall time, CPU time, CPU time
+/// per evaluation and evaluations (CPU figures only where the clock was readable).
+pub struct Timing {
+    /// Wall time, s.
+    pub seconds: Option<Summary>,
+    /// CPU time, s.
+    pub cpu_seconds: Option<Summary>,
+    /// CPU time per evaluation, µs.
+    pub micros_per_evaluation: Option<Summary>,
+    /// Candidates evaluated.
+    pub evaluations: Option<Summary>,
+}
+
+impl Timing {
+    /// The statistics of `queries`.
+    pub fn of(queries: &[Query]) -> Self {
+        let secs: Vec<f64> = queries.iter().map(|q| q.seconds).collect();
+        let cpu: Vec<f64> = queries.iter().map(|q| q.cpu_seconds).filter(|c| c.is_finite()).collect();
+        let per: Vec<f64> = queries
+            .iter()
+            .filter(|q| q.evaluations.total > 0 && q.cpu_seconds.is_finite())
+            .map(|q| q.cpu_seconds * 1e6 / q.evaluations.total as f64)
+            .collect();
+        let evals: Vec<f64> = queries.iter().map(|q| q.evaluations.total as f64).collect();
+        Timing {
+            seconds: Summary::of(&secs),
+            cpu_seconds: Summary::of(&cpu),
+            micros_per_evaluation: Summary::of(&per),
+            evaluations: Summary::of(&evals),
+        }
+    }
+}
+
 impl Evaluation {
     /// Index of the contender named `name`.
     pub fn index(&self, name: &str) -> Option<usize> {
@@ -246,18 +279,10 @@ impl Evaluation {
             "| algorithm | threads | time median | ± std | max | CPU time median | evaluations median | CPU-µs per evaluation (median) |\n|---|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         for (c, name) in self.names.iter().enumerate() {
-            let q = &self.queries[c];
-            let secs: Vec<f64> = q.iter().map(|q| q.seconds).collect();
-            let evals: Vec<f64> = q.iter().map(|q| q.evaluations.total as f64).collect();
-            let cpu: Vec<f64> = q.iter().map(|q| q.cpu_seconds).filter(|c| c.is_finite()).collect();
-            let per: Vec<f64> = q
-                .iter()
-                .filter(|q| q.evaluations.total > 0 && q.cpu_seconds.is_finite())
-                .map(|q| q.cpu_seconds * 1e6 / q.evaluations.total as f64)
-                .collect();
-            let (Some(t), Some(e)) = (Summary::of(&secs), Summary::of(&evals)) else { continue };
-            let per = Summary::of(&per).map_or("–".to_string(), |p| format!("{:.3}", p.median));
-            let cpu = Summary::of(&cpu).map_or("–".to_string(), |c| duration(c.median));
+            let timing = Timing::of(&self.queries[c]);
+            let (Some(t), Some(e)) = (timing.seconds, timing.evaluations) else { continue };
+            let per = timing.micros_per_evaluation.map_or("–".to_string(), |p| format!("{:.3}", p.median));
+            let cpu = timing.cpu_seconds.map_or("–".to_string(), |c| duration(c.median));
             let _ = writeln!(
                 out,
                 "| {name} | {} | {} | {} | {} | {cpu} | {:.0} | {per} |",

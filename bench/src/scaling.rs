@@ -13,7 +13,7 @@
 //! assert!(rows[3].occupied_cells.unwrap() > 10_000);
 //! ```
 
-use crate::evaluation::{Contender, duration, evaluate};
+use crate::evaluation::{Contender, Timing, duration, evaluate};
 use crate::numerical::{NumericalConfig, numerical_map, voxelized};
 use crate::stats::Summary;
 use dyfos_service::search::AnySearch;
@@ -109,23 +109,16 @@ fn row(
 ) -> ScalingRow {
     let run = evaluate(scenarios, contender, seed, 3);
     let q = &run.queries[0];
-    let secs: Vec<f64> = q.iter().map(|q| q.seconds).collect();
-    let cpu: Vec<f64> = q.iter().map(|q| q.cpu_seconds).filter(|c| c.is_finite()).collect();
-    let per: Vec<f64> = q
-        .iter()
-        .filter(|q| q.evaluations.total > 0 && q.cpu_seconds.is_finite())
-        .map(|q| q.cpu_seconds * 1e6 / q.evaluations.total as f64)
-        .collect();
-    let evals: Vec<f64> = q.iter().map(|q| q.evaluations.total as f64).collect();
+    let timing = Timing::of(q);
     ScalingRow {
         obstacles: n,
         half_width: config.half_width,
         kind,
         occupied_cells,
-        seconds: Summary::of(&secs),
-        cpu_seconds: Summary::of(&cpu).map(|s| s.median),
-        micros_per_evaluation: Summary::of(&per).map(|s| s.median),
-        evaluations: Summary::of(&evals).map(|s| s.median),
+        seconds: timing.seconds,
+        cpu_seconds: timing.cpu_seconds.map(|s| s.median),
+        micros_per_evaluation: timing.micros_per_evaluation.map(|s| s.median),
+        evaluations: timing.evaluations.map(|s| s.median),
         feasible: q.iter().filter(|q| q.feasible()).count(),
         skipped: None,
     }
