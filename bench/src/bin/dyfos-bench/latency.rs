@@ -575,6 +575,24 @@ struct InDaemon {
     p99_us: u64,
 }
 
+/// Connects to the bench's daemon (`which`, whose log is in the error if it never
+/// came up) and uploads `set`'s maps.
+fn connect_and_upload(b: &Bench, set: &RequestSet, log: &Path, which: &str) -> anyhow::Result<Client> {
+    let config = ClientConfig {
+        prefix: b.prefix.clone(),
+        domain: Some(b.domain.clone()),
+        connect_timeout: TIMEOUT,
+        ..ClientConfig::default()
+    };
+    let mut client = Client::connect(&config).with_context(|| {
+        format!("{which} did not start; its log:\n{}", std::fs::read_to_string(log).unwrap_or_default())
+    })?;
+    for (i, s) in set.scenarios.iter().enumerate() {
+        client.upload_map(map_id(i), &s.world, false, TIMEOUT).with_context(|| format!("uploading map {i}"))?;
+    }
+    Ok(client)
+}
+
 fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     let a = b.args;
     let set = RequestSet::new(a.seed, a.maps);
@@ -583,19 +601,8 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     let log = b.tmp.join("dyfosd.log");
     let mut daemon = start_daemon(b, dyfosd, &[], &state, &log)?;
     b.daemon_pid.set(daemon.id());
-    let config = ClientConfig {
-        prefix: b.prefix.clone(),
-        domain: Some(b.domain.clone()),
-        connect_timeout: TIMEOUT,
-        ..ClientConfig::default()
-    };
-    let mut client = Client::connect(&config).with_context(|| {
-        format!("dyfosd did not start; its log:\n{}", std::fs::read_to_string(&log).unwrap_or_default())
-    })?;
+    let mut client = connect_and_upload(b, &set, &log, "dyfosd")?;
     let workers = client.stats(TIMEOUT)?.workers;
-    for (i, s) in set.scenarios.iter().enumerate() {
-        client.upload_map(map_id(i), &s.world, false, TIMEOUT).with_context(|| format!("uploading map {i}"))?;
-    }
 
     let mut rows = Vec::new();
     let mut in_daemon = None;
@@ -728,19 +735,7 @@ fn run_baseline(b: &Bench, dyfosd: &Path) -> anyhow::Result<Vec<Row>> {
     eprintln!("latency: second daemon with {}", a.compare_daemon_args.join(" "));
     let mut daemon = start_daemon(b, dyfosd, &a.compare_daemon_args, &state, &log)?;
     b.daemon_pid.set(daemon.id());
-    let config = ClientConfig {
-        prefix: b.prefix.clone(),
-        domain: Some(b.domain.clone()),
-        connect_timeout: TIMEOUT,
-        ..ClientConfig::default()
-    };
-    let mut client = Client::connect(&config).with_context(|| {
-        format!("second dyfosd did not start; its log:\n{}", std::fs::read_to_string(&log).unwrap_or_default())
-    })?;
-    for (i, s) in set.scenarios.iter().enumerate() {
-        client.upload_map(map_id(i), &s.world, false, TIMEOUT).with_context(|| format!("uploading map {i}"))?;
-    }
-    drop(client);
+    drop(connect_and_upload(b, &set, &log, "second dyfosd")?);
     let mut rows = Vec::new();
     for groups in baseline_groups(a) {
         rows.extend(b.run_groups(&groups)?);
