@@ -99,6 +99,14 @@ impl Sandbox {
         vec!["--prefix".into(), self.prefix.clone(), "--domain".into(), self.domain.clone()]
     }
 
+    /// `dyfos SUBCOMMAND` pointed at this sandbox's daemon; add the command's own
+    /// arguments to it.
+    pub fn dyfos(&self, subcommand: &str) -> Command {
+        let mut cmd = Command::new(bin("dyfos"));
+        cmd.arg(subcommand).args(self.dyfos_flags());
+        cmd
+    }
+
     /// Starts `dyfosd` for this sandbox and waits until it answers.
     pub fn start_daemon(&self, extra: &[&str]) -> DaemonProcess {
         let log = self.state_dir.with_extension(format!("log-{}", NEXT.fetch_add(1, Ordering::Relaxed)));

@@ -8,8 +8,8 @@
 //! the assertions are on the daemon's counters, polled with [`wait_for`].
 
 use dyfos_client::prelude::*;
-use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, bin, data, signal, wait_for};
-use std::process::{Command, Stdio};
+use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, data, signal, wait_for};
+use std::process::Stdio;
 use std::time::Duration;
 
 const SCENARIO: &str = "golden/scenarios/hard/hard_01.json";
@@ -65,11 +65,10 @@ fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
     // `dyfos query` uploads the scenario's world itself, under an id of its own.
     let file = TempFile(sandbox.state_dir.with_extension("slow.json"));
     std::fs::write(&file.0, Scenario { world: slow_world(), ..scenario() }.to_json()).unwrap();
-    let child = Command::new(bin("dyfos"))
-        .arg("query")
+    let child = sandbox
+        .dyfos("query")
         .arg(&file.0)
         .args(["--algo", "brute"])
-        .args(sandbox.dyfos_flags())
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -96,7 +95,7 @@ fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
     assert!(log.contains("query abandoned: its client has gone"), "{log}");
 
     // `dyfos stats` shows the counter.
-    let out = Command::new(bin("dyfos")).arg("stats").args(sandbox.dyfos_flags()).output().unwrap();
+    let out = sandbox.dyfos("stats").output().unwrap();
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stats JSON");
     assert_eq!(json["queries_abandoned"], 1, "{json}");
 }

@@ -124,11 +124,10 @@ fn several_client_processes_at_once_and_the_examples() {
     let queries: Vec<ChildGuard> = seeds
         .iter()
         .map(|seed| {
-            let child = Command::new(bin("dyfos"))
-                .arg("query")
+            let child = sandbox
+                .dyfos("query")
                 .arg(&file)
                 .args(["--seed", &seed.to_string()])
-                .args(sandbox.dyfos_flags())
                 .stdout(Stdio::piped())
                 .stderr(Stdio::piped())
                 .spawn()
@@ -194,7 +193,7 @@ fn dyfos_query_prints_what_dyfos_solve_prints() {
     for args in [&["--seed", "5"][..], &["--algo", "center", "--seed", "9"][..]] {
         assert_eq!(run(args, true), run(args, false), "{args:?}");
     }
-    let stats = Command::new(bin("dyfos")).arg("stats").args(sandbox.dyfos_flags()).output().unwrap();
+    let stats = sandbox.dyfos("stats").output().unwrap();
     let stats: serde_json::Value = serde_json::from_slice(&stats.stdout).expect("stats JSON");
     assert_eq!(stats["queries_served"], 2);
     assert_eq!(stats["maps"], 1);

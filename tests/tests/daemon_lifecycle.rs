@@ -78,11 +78,10 @@ fn killing_a_client_mid_query_does_not_disturb_the_others() {
     let file = data("golden/scenarios/hard/hard_01.json");
     let s = scenario("golden/scenarios/hard/hard_01.json");
     client.upload_map(1, &s.world, false, PATIENCE).unwrap();
-    let child = Command::new(bin("dyfos"))
-        .arg("query")
+    let child = sandbox
+        .dyfos("query")
         .arg(&file)
         .args(["--algo", "brute", "--map", "1"])
-        .args(sandbox.dyfos_flags())
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -144,12 +143,11 @@ fn a_reply_meant_for_a_killed_client_never_reaches_the_next_one() {
     admin.upload_map(1, &scenario("golden/scenarios/hard/hard_01.json").world, false, PATIENCE).unwrap();
     admin.upload_map(2, &scenario("golden/scenarios/numerical/map_00.json").world, false, PATIENCE).unwrap();
     let query = |file: &std::path::Path, map: &str, extra: &[&str]| {
-        Command::new(bin("dyfos"))
-            .arg("query")
+        sandbox
+            .dyfos("query")
             .arg(file)
             .args(["--algo", "brute", "--map", map])
             .args(extra)
-            .args(sandbox.dyfos_flags())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
