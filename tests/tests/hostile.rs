@@ -118,6 +118,9 @@ fn random_header(rng: &mut ChaCha8Rng) -> RendezvousRequestHeader {
         lambda: f(),
         perimeter_points: rng.next_u32(),
         model: rng.next_u32() % 5,
+        // Mostly every field given; sometimes a random mask, unknown bits included.
+        set: if rng.random_range(0..4) > 0 { WireParams::ALL_SET } else { rng.next_u32() },
+        reserved: u32::from(rng.random_range(0..50) == 0),
     };
     RendezvousRequestHeader {
         request_id: rng.next_u64(),

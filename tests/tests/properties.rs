@@ -74,6 +74,8 @@ fn wire_params(f: &[f64], perimeter_points: u32, model: u32) -> WireParams {
         lambda: f[16],
         perimeter_points,
         model,
+        set: WireParams::ALL_SET,
+        reserved: 0,
     }
 }
 

@@ -49,6 +49,23 @@ pub enum Mode {
 
 /// Every parameter of SPEC §11, as plain numbers. `model`: 0 paper, 1 anisotropic,
 /// 2 learned.
+///
+/// `set` says which fields the request gives: bit `i` (see [`WireParams::FIELDS`],
+/// in field order) set means field `i` is used, clear means the SPEC default is used
+/// and the field's bits are ignored. So an all-zero `WireParams` asks for every SPEC
+/// default, and a client in any language overrides one parameter without knowing the
+/// others' values. Bits above [`WireParams::ALL_SET`] and a non-zero `reserved` are
+/// `invalid_params`.
+///
+/// ```
+/// use dyfos_shared::params::Params;
+/// use dyfos_shared::wire::rendezvous::WireParams;
+///
+/// let only_lambda = WireParams { lambda: 2.0, set: WireParams::bit("lambda").unwrap(), ..WireParams::default() };
+/// let params = Params::try_from(&only_lambda).unwrap();
+/// assert_eq!(params, Params { lambda: 2.0, ..Params::default() });
+/// assert_eq!(Params::try_from(&WireParams::default()).unwrap(), Params::default());
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[type_name("dyfos::WireParams")]
 #[repr(C)]
@@ -87,6 +104,42 @@ pub struct WireParams {
     pub perimeter_points: u32,
     /// 0 paper, 1 anisotropic, 2 learned.
     pub model: u32,
+    /// Which fields are given, one bit per field in [`WireParams::FIELDS`] order;
+    /// a clear bit means the SPEC default.
+    pub set: u32,
+    /// Must be 0.
+    pub reserved: u32,
+}
+
+impl WireParams {
+    /// The fields' SPEC §11 names, in field order: bit `i` of `set` is `FIELDS[i]`.
+    pub const FIELDS: [&'static str; 17] = [
+        "rover_radius",
+        "marker_size",
+        "marker_height",
+        "viewer_radius",
+        "safety_margin",
+        "z_min",
+        "z_max",
+        "camera_pitch",
+        "t_vs",
+        "f_h",
+        "f_v",
+        "rho_min",
+        "rho_max",
+        "kappa",
+        "lambda",
+        "perimeter_points",
+        "model",
+    ];
+
+    /// `set` with every field given.
+    pub const ALL_SET: u32 = (1 << Self::FIELDS.len()) - 1;
+
+    /// The `set` bit of the field named `name` (SPEC §11 name), if there is one.
+    pub fn bit(name: &str) -> Option<u32> {
+        Self::FIELDS.iter().position(|f| *f == name).map(|i| 1 << i)
+    }
 }
 
 impl From<&Params> for WireParams {
@@ -113,6 +166,8 @@ impl From<&Params> for WireParams {
                 ModelKind::Anisotropic => 1,
                 ModelKind::Learned => 2,
             },
+            set: WireParams::ALL_SET,
+            reserved: 0,
         }
     }
 }
@@ -121,7 +176,47 @@ impl TryFrom<&WireParams> for Params {
     type Error = Rejection;
 
     /// Decodes and validates (SPEC §11 ranges): `invalid_params` names the field.
+    /// Fields whose `set` bit is clear take the SPEC default.
     fn try_from(w: &WireParams) -> Result<Self, Rejection> {
+        if w.set & !WireParams::ALL_SET != 0 || w.reserved != 0 {
+            return Err(Rejection::new(
+                Status::InvalidParams,
+                format!(
+                    "params.set = {:#x} has bits above {:#x}, or params.reserved = {} is not 0",
+                    w.set,
+                    WireParams::ALL_SET,
+                    w.reserved
+                ),
+            ));
+        }
+        // Unset fields take their default before anything is decoded, so their
+        // bits (whatever a peer left there) are never looked at.
+        let d = WireParams::from(&Params::default());
+        let given = |name: &str| w.set & WireParams::bit(name).unwrap_or(0) != 0;
+        macro_rules! pick {
+            ($($field:ident),*) => {
+                WireParams { $($field: if given(stringify!($field)) { w.$field } else { d.$field },)* set: w.set, reserved: 0 }
+            };
+        }
+        let w = &pick!(
+            rover_radius,
+            marker_size,
+            marker_height,
+            viewer_radius,
+            safety_margin,
+            z_min,
+            z_max,
+            camera_pitch,
+            t_vs,
+            f_h,
+            f_v,
+            rho_min,
+            rho_max,
+            kappa,
+            lambda,
+            perimeter_points,
+            model
+        );
         let model = match w.model {
             0 => ModelKind::Paper,
             1 => ModelKind::Anisotropic,
@@ -531,6 +626,46 @@ mod tests {
         let too_many =
             vec![WireDelta { tag: super::super::map::tag::CLEAR, ..Default::default() }; MAX_INLINE_DELTAS + 1];
         assert_eq!(RendezvousRequest::decode(&h, &too_many).unwrap_err().status, Status::OverCapacity);
+    }
+
+    #[test]
+    fn params_left_unset_take_the_spec_default() {
+        let default = Params::default();
+        // Zeroed (as a C or Python client allocates it): every default.
+        assert_eq!(Params::try_from(&WireParams::default()).unwrap(), default);
+        // Unset fields are ignored whatever their bits, even NaN.
+        let garbage = WireParams { kappa: f64::NAN, model: 99, rho_min: -1.0, ..WireParams::default() };
+        assert_eq!(Params::try_from(&garbage).unwrap(), default);
+        // Each field alone: given, it is used; every name in FIELDS names a field.
+        let changed = Params {
+            rover_radius: 0.5,
+            perimeter_points: 4,
+            marker_size: 0.3,
+            marker_height: 0.25,
+            viewer_radius: 0.3,
+            safety_margin: 0.2,
+            z_min: 0.6,
+            z_max: 7.0,
+            camera_pitch: 0.5,
+            t_vs: Vector3::new(0.2, 0.0, -0.1),
+            f_h: 1.0,
+            f_v: 0.6,
+            rho_min: 1.5,
+            rho_max: 5.0,
+            kappa: 2.0,
+            lambda: 2.5,
+            model: ModelKind::Anisotropic,
+        };
+        let full = WireParams::from(&changed);
+        for name in WireParams::FIELDS {
+            let one = WireParams { set: WireParams::bit(name).unwrap(), ..full };
+            let decoded = Params::try_from(&one).unwrap();
+            assert_ne!(decoded, default, "{name} is not decoded");
+        }
+        assert_eq!(Params::try_from(&full).unwrap(), changed);
+        for bad in [WireParams { set: 1 << 17, ..full }, WireParams { reserved: 1, ..full }] {
+            assert_eq!(Params::try_from(&bad).unwrap_err().status, Status::InvalidParams);
+        }
     }
 
     #[test]
