@@ -458,6 +458,39 @@ impl Client {
         Ok(version)
     }
 
+    /// Makes sure the daemon holds `world` (a scenario's map) and returns its id and
+    /// version: the map is uploaded under `map` (default: [`World::content_id`], so
+    /// the same scenario reuses its map); if that id holds the same content already,
+    /// it is reused as it is; if it holds other content, `replace` replaces it, else
+    /// the error is `map_exists`.
+    pub fn upload_scenario_map(
+        &mut self,
+        world: &World,
+        map: Option<MapId>,
+        replace: bool,
+        timeout: Duration,
+    ) -> Result<(MapId, u64), MapRequestError> {
+        let start = Instant::now();
+        let map = map.unwrap_or_else(|| world.content_id());
+        match self.upload_map(map, world, false, timeout) {
+            Ok(version) => Ok((map, version)),
+            Err(e) if e.status() == Some(Status::MapExists) => {
+                let existing = self.snapshot(map, timeout.saturating_sub(start.elapsed()))?;
+                if existing.same_content(world) {
+                    Ok((map, existing.version()))
+                } else if replace {
+                    Ok((map, self.upload_map(map, world, true, timeout.saturating_sub(start.elapsed()))?))
+                } else {
+                    Err(MapRequestError::Rejected(Rejection::new(
+                        Status::MapExists,
+                        format!("map {map} exists in the daemon with other content; replace it, or use another map id"),
+                    )))
+                }
+            }
+            Err(e) => Err(e),
+        }
+    }
+
     /// The map as it is now, read in pages; retried if it changes while paging.
     pub fn snapshot(&mut self, map: MapId, timeout: Duration) -> Result<World, MapRequestError> {
         let start = Instant::now();

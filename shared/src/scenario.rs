@@ -300,21 +300,53 @@ fn malformed(path: String, inner: serde_json::Error) -> ScenarioError {
     ScenarioError::Malformed { path, message: suggest(message), line, column }
 }
 
+/// Parses exactly one JSON object of type `T` (white space around it allowed,
+/// nothing after it); errors name the field, under `root`.
+fn parse_object<T: serde::de::DeserializeOwned>(json: &str, root: &str) -> Result<T, ScenarioError> {
+    let de = &mut serde_json::Deserializer::from_str(json);
+    let raw: Object<T> = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
+        let mut path = e.path().to_string();
+        if inner_is_unknown_field(&e) {
+            // The path ends in the unknown name itself; report its parent.
+            path = path.rsplit_once('.').map(|(parent, _)| parent.to_string()).unwrap_or_default();
+        }
+        let path = match path.as_str() {
+            _ if root.is_empty() => path,
+            "." | "" => root.to_string(),
+            p => format!("{root}.{p}"),
+        };
+        malformed(path, e.into_inner())
+    })?;
+    de.end().map_err(|e| malformed(root.to_string(), e))?;
+    Ok(raw.0)
+}
+
+/// Parses a scenario's `params` object on its own (SPEC §11 names, every field
+/// optional, the rest SPEC defaults), validated: what bindings take for "params as
+/// a dict". Errors name the field as in a scenario, e.g. `params.rho_min`.
+///
+/// ```
+/// use dyfos_shared::params::Params;
+/// use dyfos_shared::scenario::params_from_json;
+///
+/// assert_eq!(params_from_json(r#"{"lambda": 2.0}"#).unwrap(), Params { lambda: 2.0, ..Params::default() });
+/// assert_eq!(params_from_json("{}").unwrap(), Params::default());
+/// assert!(params_from_json(r#"{"rho_mim": 2}"#).unwrap_err().to_string().contains("rho_min"));
+/// ```
+pub fn params_from_json(json: &str) -> Result<Params, ScenarioError> {
+    let raw: RawParams = parse_object(json, "params")?;
+    let params = raw.resolve();
+    params
+        .validate()
+        .map_err(|e| ScenarioError::invalid(format!("params.{}", e.field), format!("= {} {}", e.value, e.rule)))?;
+    Ok(params)
+}
+
 impl Scenario {
     /// Parses and validates a scenario document: exactly one JSON object, white
     /// space around it allowed, nothing else after it.
     pub fn from_json(json: &str) -> Result<Self, ScenarioError> {
-        let de = &mut serde_json::Deserializer::from_str(json);
-        let raw: Object<RawScenario> = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
-            let mut path = e.path().to_string();
-            if inner_is_unknown_field(&e) {
-                // The path ends in the unknown name itself; report its parent.
-                path = path.rsplit_once('.').map(|(parent, _)| parent.to_string()).unwrap_or_default();
-            }
-            malformed(path, e.into_inner())
-        })?;
-        de.end().map_err(|e| malformed(String::new(), e))?;
-        Self::from_raw(raw.0)
+        Self::from_raw(parse_object(json, "")?)
     }
 
     fn from_raw(raw: RawScenario) -> Result<Self, ScenarioError> {

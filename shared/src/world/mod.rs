@@ -238,6 +238,61 @@ impl World {
         self.voxels.as_ref()
     }
 
+    /// The map as the JSON object `dyfos map snapshot` prints (without its `map` id):
+    /// `version`, `bounds`, `sun`, `obstacles` in scenario form, and `voxels` if any.
+    pub fn to_json(&self) -> serde_json::Value {
+        let obstacles: Vec<serde_json::Value> = self
+            .obstacles
+            .iter()
+            .map(|(id, o)| match o {
+                Obstacle::Cylinder(VerticalCylinder { center, radius, height }) => serde_json::json!({
+                    "id": id, "cylinder": {"x": center.x, "y": center.y, "radius": radius, "height": height}
+                }),
+                Obstacle::Box(AxisBox { min, max }) => serde_json::json!({
+                    "id": id, "box": {"min": <[f64; 3]>::from(min.coords), "max": <[f64; 3]>::from(max.coords)}
+                }),
+            })
+            .collect();
+        let mut out = serde_json::json!({
+            "version": self.version,
+            "bounds": self.bounds.to_array(),
+            "sun": {"elevation": self.sun.elevation, "azimuth": self.sun.azimuth},
+            "obstacles": obstacles,
+        });
+        if let Some(v) = &self.voxels {
+            out["voxels"] = serde_json::json!({
+                "resolution": v.resolution(),
+                "origin": <[f64; 3]>::from(v.origin().coords),
+                "occupied": v.occupied().collect::<Vec<_>>(),
+            });
+        }
+        out
+    }
+
+    /// Whether `other` holds the same bounds, sun, obstacles and voxels, whatever
+    /// the versions.
+    pub fn same_content(&self, other: &World) -> bool {
+        self.bounds == other.bounds
+            && self.sun == other.sun
+            && self.obstacles == other.obstacles
+            && self.voxels == other.voxels
+    }
+
+    /// A 64-bit digest of the content ([`World::same_content`] worlds share it):
+    /// the map id a scenario's map gets when none is given, so the same scenario
+    /// reuses its map in the daemon.
+    pub fn content_id(&self) -> u64 {
+        let text = format!(
+            "{:?}{:?}{:?}{:?}",
+            self.bounds,
+            self.sun,
+            self.obstacles,
+            self.voxels.as_ref().map(|v| (v.resolution(), v.origin(), v.occupied().copied().collect::<Vec<_>>()))
+        );
+        // FNV-1a, 64 bit.
+        text.bytes().fold(0xcbf29ce484222325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100000001b3))
+    }
+
     /// This world with `deltas` applied in order, all or none (SPEC §1). The version
     /// grows by one per delta. On error, names the first failing delta.
     pub fn apply(&self, deltas: &[MapDelta]) -> Result<World, MapDeltaError> {

@@ -6,7 +6,6 @@ use crate::offline::{load_scenario, parse_algorithm};
 use anyhow::anyhow;
 use dyfos_client::prelude::*;
 use dyfos_client::{MapRequestError, RendezvousError};
-use dyfos_shared::world::{AxisBox, VerticalCylinder};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -162,45 +161,13 @@ fn rendezvous_failure(e: RendezvousError) -> Failure {
     failure(e.status(), e)
 }
 
-/// A map id from the content: the same map gets the same id.
-fn content_id(world: &World) -> MapId {
-    let text = format!(
-        "{:?}{:?}{:?}{:?}",
-        world.bounds(),
-        world.sun(),
-        world.obstacles(),
-        world.voxels().map(|v| { (v.resolution(), v.origin(), v.occupied().copied().collect::<Vec<_>>()) })
-    );
-    // FNV-1a, 64 bit.
-    text.bytes().fold(0xcbf29ce484222325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100000001b3))
-}
-
-fn same_content(a: &World, b: &World) -> bool {
-    a.bounds() == b.bounds() && a.sun() == b.sun() && a.obstacles() == b.obstacles() && a.voxels() == b.voxels()
-}
-
 /// `dyfos query`.
 pub fn query(args: &QueryArgs) -> Result<(), Failure> {
     let scenario = load_scenario(&args.scenario)?;
     let timeout = args.daemon.timeout()?;
     let mut client = args.daemon.connect()?;
-    let map = args.map.unwrap_or_else(|| content_id(&scenario.world));
-    let version = match client.upload_map(map, &scenario.world, false, timeout) {
-        Ok(v) => v,
-        Err(e) if e.status() == Some(Status::MapExists) => {
-            let existing = client.snapshot(map, timeout).map_err(map_failure)?;
-            if same_content(&existing, &scenario.world) {
-                existing.version()
-            } else if args.replace {
-                client.upload_map(map, &scenario.world, true, timeout).map_err(map_failure)?
-            } else {
-                return Err(Failure::invalid(anyhow!(
-                    "map {map} exists in the daemon with other content; pass --replace to overwrite it, or --map with another id"
-                )));
-            }
-        }
-        Err(e) => return Err(map_failure(e)),
-    };
+    let (map, version) =
+        client.upload_scenario_map(&scenario.world, args.map, args.replace, timeout).map_err(map_failure)?;
     let request = RendezvousRequest {
         expected_version: Some(version),
         algorithm: args.algo,
@@ -213,36 +180,6 @@ pub fn query(args: &QueryArgs) -> Result<(), Failure> {
     let answer = client.rendezvous(&request, timeout).map_err(rendezvous_failure)?;
     crate::print_json(&answer.to_json());
     Ok(())
-}
-
-fn world_json(id: MapId, world: &World) -> serde_json::Value {
-    let obstacles: Vec<serde_json::Value> = world
-        .obstacles()
-        .iter()
-        .map(|(id, o)| match o {
-            Obstacle::Cylinder(VerticalCylinder { center, radius, height }) => serde_json::json!({
-                "id": id, "cylinder": {"x": center.x, "y": center.y, "radius": radius, "height": height}
-            }),
-            Obstacle::Box(AxisBox { min, max }) => serde_json::json!({
-                "id": id, "box": {"min": <[f64; 3]>::from(min.coords), "max": <[f64; 3]>::from(max.coords)}
-            }),
-        })
-        .collect();
-    let mut out = serde_json::json!({
-        "map": id,
-        "version": world.version(),
-        "bounds": world.bounds().to_array(),
-        "sun": {"elevation": world.sun().elevation, "azimuth": world.sun().azimuth},
-        "obstacles": obstacles,
-    });
-    if let Some(v) = world.voxels() {
-        out["voxels"] = serde_json::json!({
-            "resolution": v.resolution(),
-            "origin": <[f64; 3]>::from(v.origin().coords),
-            "occupied": v.occupied().collect::<Vec<_>>(),
-        });
-    }
-    out
 }
 
 /// `dyfos map …`.
@@ -271,7 +208,11 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
         }
         MapCommand::Snapshot { id, daemon } => {
             let world = daemon.connect()?.snapshot(*id, daemon.timeout()?).map_err(map_failure)?;
-            crate::print_json(&world_json(*id, &world));
+            let mut json = serde_json::json!({"map": id});
+            if let (Some(out), serde_json::Value::Object(fields)) = (json.as_object_mut(), world.to_json()) {
+                out.extend(fields);
+            }
+            crate::print_json(&json);
         }
         MapCommand::Delete { id, expected_version, daemon } => {
             daemon.connect()?.delete_map(*id, *expected_version, daemon.timeout()?).map_err(map_failure)?;
