@@ -102,6 +102,16 @@ macro_rules! request_error {
                 }
             }
 
+            /// The map's version as the refused request left it, if the daemon said
+            /// (rendezvous replies): after the request's inline deltas when they were
+            /// applied before the search failed, else the version it already had.
+            pub fn map_version(&self) -> Option<u64> {
+                match self {
+                    $name::Rejected(r) => r.map_version,
+                    _ => None,
+                }
+            }
+
             /// The daemon's (or the client's) status code, if it refused the request.
             pub fn status(&self) -> Option<Status> {
                 match self {

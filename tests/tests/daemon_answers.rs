@@ -246,3 +246,66 @@ impl WaitGuarded for std::process::Child {
         std::process::Output { status, stdout, stderr }
     }
 }
+
+/// Regression (issue 11, found by an independent client): a query whose inline
+/// deltas were committed but whose search then failed replied `map_version 0`, so a
+/// client retrying with the version it was told got `map_version_mismatch`. Every
+/// reply now carries the version the request left the map at.
+#[test]
+fn a_failed_query_reports_the_version_its_inline_deltas_made() {
+    let sandbox = Sandbox::new("inline-version");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let s = scenario("example.json");
+    assert_eq!(client.upload_map(1, &s.world, false, PATIENCE).unwrap(), 0);
+    let pole = |id: u32| MapDelta::UpsertObstacle {
+        id: 100 + id,
+        obstacle: Obstacle::Cylinder(VerticalCylinder {
+            center: na::Point2::new(-8.0, 8.0 - id as f64),
+            radius: 0.2,
+            height: 1.0,
+        }),
+    };
+    // The viewer must fly at 7–8 m but see the rover within 2 m: no pose can do both.
+    let impossible = Params { z_min: 7.0, z_max: 8.0, rho_min: 1.0, rho_max: 2.0, ..s.params };
+    let request = RendezvousRequest {
+        expected_version: Some(0),
+        deltas: vec![pole(1), pole(2)],
+        params: impossible,
+        ..RendezvousRequest::new(1, s.belief)
+    };
+    let err = client.rendezvous(&request, PATIENCE).unwrap_err();
+    assert_eq!(err.status(), Some(Status::NoFeasiblePose), "{err}");
+    assert_eq!(err.map_version(), Some(2), "the two inline deltas were applied: {err:?}");
+    assert_eq!(client.snapshot(1, PATIENCE).unwrap().version(), 2);
+
+    // A deadline that passes at once: the deltas stay applied, and the reply says so
+    // whether the daemon found nothing in time or answered with what it had.
+    let rushed = RendezvousRequest {
+        expected_version: err.map_version(),
+        deltas: vec![pole(3)],
+        algorithm: Algorithm::Brute,
+        deadline: Some(Duration::from_micros(1)),
+        ..RendezvousRequest::new(1, s.belief)
+    };
+    match client.rendezvous(&rushed, PATIENCE) {
+        Ok(answer) => assert_eq!((answer.map_version, answer.stop), (3, StopReason::Deadline)),
+        Err(e) => {
+            assert_eq!(e.status(), Some(Status::DeadlineExceeded), "{e}");
+            assert_eq!(e.map_version(), Some(3), "{e:?}");
+        }
+    }
+    assert_eq!(client.snapshot(1, PATIENCE).unwrap().version(), 3);
+
+    // Refused before the deltas: nothing changed, and the reply gives the version the
+    // map has, so the retry below (with that version) is accepted.
+    let stale =
+        RendezvousRequest { expected_version: Some(0), deltas: vec![pole(4)], ..RendezvousRequest::new(1, s.belief) };
+    let err = client.rendezvous(&stale, PATIENCE).unwrap_err();
+    assert_eq!((err.status(), err.map_version()), (Some(Status::MapVersionMismatch), Some(3)), "{err}");
+    assert_eq!(client.snapshot(1, PATIENCE).unwrap().version(), 3);
+    let retried = RendezvousRequest { expected_version: err.map_version(), ..stale };
+    assert_eq!(client.rendezvous(&retried, PATIENCE).unwrap().map_version, 4);
+    let unknown = client.rendezvous(&RendezvousRequest::new(99, s.belief), PATIENCE).unwrap_err();
+    assert_eq!((unknown.status(), unknown.map_version()), (Some(Status::UnknownMap), None), "{unknown}");
+}

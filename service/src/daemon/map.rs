@@ -56,11 +56,7 @@ pub(crate) fn check_version(id: MapId, world: &World, expected: Option<u64>) -> 
 }
 
 pub(crate) fn invalid_delta(e: MapDeltaError) -> Rejection {
-    Rejection {
-        status: Status::InvalidDelta,
-        message: format!("{e}; nothing was applied"),
-        index: Some(e.index as u64),
-    }
+    Rejection::at_delta(Status::InvalidDelta, format!("{e}; nothing was applied"), e.index as u64)
 }
 
 /// A map's snapshot pages, each a self-contained chunk of records.

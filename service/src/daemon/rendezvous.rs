@@ -199,13 +199,16 @@ fn run(shared: &Shared, watch: &Watch, job: Job) {
     let (mut reply, active) = if deadline.is_some_and(|d| Instant::now() >= d) {
         let reply = RendezvousReply::rejected(
             request_id,
-            &Rejection::new(
-                Status::DeadlineExceeded,
-                format!(
-                    "the deadline of {:?} passed while the query waited for a worker; give it more time or ask for less (a budget, a cheaper algorithm)",
-                    request.deadline.unwrap_or_default()
-                ),
-            ),
+            &Rejection {
+                map_version: Some(world.version()),
+                ..Rejection::new(
+                    Status::DeadlineExceeded,
+                    format!(
+                        "the deadline of {:?} passed while the query waited for a worker; give it more time or ask for less (a budget, a cheaper algorithm)",
+                        request.deadline.unwrap_or_default()
+                    ),
+                )
+            },
         );
         (reply, active)
     } else {
@@ -245,7 +248,11 @@ fn run(shared: &Shared, watch: &Watch, job: Job) {
             })
         }) {
             Ok(answer) => RendezvousReply::answer(request_id, &answer),
-            Err(rejection) => RendezvousReply::rejected(request_id, &rejection),
+            // The inline deltas (if any) were committed on accepting the query: the
+            // reply says which version they made, whatever the search found.
+            Err(rejection) => {
+                RendezvousReply::rejected(request_id, &Rejection { map_version: Some(world.version()), ..rejection })
+            }
         };
         (reply, active)
     };
@@ -333,7 +340,9 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
         Err(rejection) => {
             debug!(request_id, status = %rejection.status, "rendezvous request rejected: {}", rejection.message);
             lock(&daemon.shared.stats).failed(rejection.status);
-            let mut reply = RendezvousReply::rejected(request_id, &rejection);
+            // Refused before any delta was applied: the map is as it was.
+            let map_version = daemon.maps.get(header.map_id).map(|w| w.version());
+            let mut reply = RendezvousReply::rejected(request_id, &Rejection { map_version, ..rejection });
             reply.daemon_micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
             send(&daemon.shared, &active, reply, reply_to);
         }

@@ -285,13 +285,13 @@ impl MapRequest {
                 if let Some(i) = deltas.iter().position(|d| {
                     !matches!(d, MapDelta::UpsertObstacle { .. } | MapDelta::SetVoxels { occupied: true, .. })
                 }) {
-                    return Err(Rejection {
-                        status: Status::MalformedDelta,
-                        message: format!(
+                    return Err(Rejection::at_delta(
+                        Status::MalformedDelta,
+                        format!(
                             "upload chunks carry only obstacle upserts and occupied voxel runs; delta #{i} is not one"
                         ),
-                        index: Some(i as u64),
-                    });
+                        i as u64,
+                    ));
                 }
                 Ok(MapRequest::Upload {
                     map,
@@ -447,7 +447,7 @@ pub fn decode_deltas(records: &[WireDelta]) -> Result<Vec<MapDelta>, Rejection> 
     while i < records.len() {
         let r = records[i];
         let index = out.len() as u64;
-        let bad = |message: String| Rejection { status: Status::MalformedDelta, message, index: Some(index) };
+        let bad = |message: String| Rejection::at_delta(Status::MalformedDelta, message, index);
         if r.reserved != 0 {
             return Err(bad(format!("record {i}: reserved = {} must be 0", r.reserved)));
         }

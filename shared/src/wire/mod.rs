@@ -251,13 +251,24 @@ pub struct Rejection {
     pub message: String,
     /// For delta errors, the failing delta's position in its batch.
     pub index: Option<u64>,
+    /// For rendezvous replies, the map's version as this request left it: after its
+    /// inline deltas if they were applied before the search failed
+    /// (`no_feasible_pose`, `deadline_exceeded`, `internal_error`), else the version
+    /// it had when the request was refused; `None` if no map has the id (or the
+    /// reply did not say).
+    pub map_version: Option<u64>,
 }
 
 impl Rejection {
     /// A rejection without an index.
     pub fn new(status: Status, message: impl Into<String>) -> Self {
         debug_assert!(status != Status::Ok);
-        Rejection { status, message: message.into(), index: None }
+        Rejection { status, message: message.into(), index: None, map_version: None }
+    }
+
+    /// A rejection of the delta at `index` of its batch.
+    pub fn at_delta(status: Status, message: impl Into<String>, index: u64) -> Self {
+        Rejection { index: Some(index), ..Rejection::new(status, message) }
     }
 
     /// The wire form of `index` (`u64::MAX` for none).
@@ -270,10 +281,8 @@ impl Rejection {
     pub fn from_wire(status: u32, detail: &Detail, index: u64) -> Self {
         let message = detail.text();
         match Status::try_from(status) {
-            Ok(status) => Rejection { status, message, index: (index != u64::MAX).then_some(index) },
-            Err(e) => {
-                Rejection { status: Status::MalformedRequest, message: format!("reply {e}: {message}"), index: None }
-            }
+            Ok(status) => Rejection { index: (index != u64::MAX).then_some(index), ..Rejection::new(status, message) },
+            Err(e) => Rejection::new(Status::MalformedRequest, format!("reply {e}: {message}")),
         }
     }
 }

@@ -8,6 +8,12 @@
 //!
 //! *Interpretations:* the expected version is checked against the map *before* the
 //! inline deltas; the answer's `map_version` is the version searched (after them).
+//! Inline deltas describe the world, so once valid they are committed before the
+//! search and stay applied whatever the search finds: a reply of `no_feasible_pose`,
+//! `deadline_exceeded` or `internal_error` to a request that carried deltas means
+//! they *were* applied, and its `map_version` is the version they produced. Every
+//! other error is given before the deltas are applied (all or none), changes
+//! nothing, and carries the map's version as it is.
 //! The deadline is relative, counted from the moment the daemon receives the
 //! request (queueing included): processes share no clock on the wire.
 //!
@@ -293,7 +299,8 @@ pub struct RendezvousRequest {
     /// The rover's a priori belief at the rendezvous (SPEC §2).
     pub belief: Belief,
     /// Deltas applied to the map, all or none, before the search (a newly seen
-    /// obstacle, a moved sun). They change the stored map.
+    /// obstacle, a moved sun). They change the stored map, and stay applied even
+    /// if the search then finds no pose or runs out of time.
     pub deltas: Vec<MapDelta>,
     /// The search algorithm.
     pub algorithm: Algorithm,
@@ -424,7 +431,11 @@ pub struct RendezvousReply {
     pub mode: u32,
     /// The request's id.
     pub request_id: u64,
-    /// The map version searched (or checked).
+    /// On success, the map version searched (or checked), after the inline deltas.
+    /// On error, the version as the request left the map: after its inline deltas
+    /// when they were applied before the search failed (`no_feasible_pose`,
+    /// `deadline_exceeded`, `internal_error`), else the version the map had when
+    /// the request was refused (nothing changed); [`ANY_VERSION`] if no map has the id.
     pub map_version: u64,
     /// x = (ρ, ψ, φ, ψ_v).
     pub x: [f64; 4],
@@ -511,22 +522,30 @@ impl RendezvousReply {
         }
     }
 
-    /// An error reply.
+    /// An error reply; `map_version` is the rejection's, or [`ANY_VERSION`] (`u64::MAX`)
+    /// for none.
     pub fn rejected(request_id: u64, rejection: &Rejection) -> Self {
         RendezvousReply {
             status: rejection.status as u32,
             request_id,
+            map_version: rejection.map_version.unwrap_or(ANY_VERSION),
             error_index: rejection.wire_index(),
             detail: Detail::new(&rejection.message),
             ..Default::default()
         }
     }
 
+    /// The rejection an error reply carries, with its map version.
+    fn rejection(&self) -> Rejection {
+        let map_version = (self.map_version != ANY_VERSION).then_some(self.map_version);
+        Rejection { map_version, ..Rejection::from_wire(self.status, &self.detail, self.error_index) }
+    }
+
     /// Decodes a solve reply: the answer, or the daemon's rejection. Tags from the
     /// wire are checked, never trusted.
     pub fn decode_answer(&self) -> Result<Answer, Rejection> {
         if self.status != Status::Ok as u32 {
-            return Err(Rejection::from_wire(self.status, &self.detail, self.error_index));
+            return Err(self.rejection());
         }
         let bad = |what: String| Rejection::new(Status::MalformedRequest, format!("malformed reply: {what}"));
         let algorithm = *Algorithm::ALL
@@ -563,7 +582,7 @@ impl RendezvousReply {
     /// Decodes a check reply.
     pub fn decode_check(&self) -> Result<RendezvousCheck, Rejection> {
         if self.status != Status::Ok as u32 {
-            return Err(Rejection::from_wire(self.status, &self.detail, self.error_index));
+            return Err(self.rejection());
         }
         Ok(RendezvousCheck { map_version: self.map_version })
     }
@@ -670,7 +689,8 @@ mod tests {
 
     #[test]
     fn replies_round_trip_and_reject_bad_tags() {
-        let rejection = Rejection { status: Status::InvalidDelta, message: "delta #2: no".into(), index: Some(2) };
+        let rejection =
+            Rejection { map_version: Some(6), ..Rejection::at_delta(Status::InvalidDelta, "delta #2: no", 2) };
         assert_eq!(RendezvousReply::rejected(1, &rejection).decode_answer().unwrap_err(), rejection);
         let ok = RendezvousReply { stop: 3, algorithm: 2, ..RendezvousReply::checked(1, 4) };
         let answer = ok.decode_answer().unwrap();

@@ -161,21 +161,24 @@ fn write(args: &Args) {
             attempts += 1;
             // Both paths carry the version the batch was made for.
             let sent: Result<u64, Outcome> = if inline {
+                // One inline batch in three rides a query that finds nothing: the
+                // deltas stay applied, and the reply must say which version they made
+                // (checked against the replay like any acknowledged version).
                 let request = RendezvousRequest {
                     expected_version: Some(from),
                     deltas: deltas.clone(),
                     algorithm: Algorithm::Center,
                     seed: k,
+                    params: if k % 3 == 1 { unreachable_params() } else { Params::default() },
                     ..RendezvousRequest::new(WRITER_MAP, belief)
                 };
                 match client.rendezvous(&request, SOAK_TIMEOUT) {
                     Ok(a) => Ok(a.map_version),
-                    // The deltas are applied before the search: a search that finds
-                    // nothing still moved the map.
                     Err(RendezvousError::Rejected(r))
                         if matches!(r.status, Status::NoFeasiblePose | Status::DeadlineExceeded) =>
                     {
-                        Ok(from + deltas.len() as u64)
+                        // No version (u64::MAX) fails the check below as Fatal.
+                        Ok(r.map_version.unwrap_or(u64::MAX))
                     }
                     Err(e) => Err(rendezvous_outcome(&e)),
                 }
@@ -241,6 +244,12 @@ fn write(args: &Args) {
         }
         std::thread::sleep(Duration::from_millis(5));
     }
+}
+
+/// Parameters no viewer pose satisfies: it must fly at 7–8 m but see the rover
+/// within 2 m.
+fn unreachable_params() -> Params {
+    Params { z_min: 7.0, z_max: 8.0, rho_min: 1.0, rho_max: 2.0, ..Params::default() }
 }
 
 fn main() -> ExitCode {
