@@ -107,15 +107,20 @@ impl Sandbox {
         cmd
     }
 
-    /// Starts `dyfosd` for this sandbox and waits until it answers.
+    /// Starts `dyfosd` for this sandbox, logging at `debug`, and waits until it answers.
     pub fn start_daemon(&self, extra: &[&str]) -> DaemonProcess {
+        self.start_daemon_logging("debug", extra)
+    }
+
+    /// Starts `dyfosd` with `RUST_LOG=level` and waits until it answers.
+    pub fn start_daemon_logging(&self, level: &str, extra: &[&str]) -> DaemonProcess {
         let log = self.state_dir.with_extension(format!("log-{}", NEXT.fetch_add(1, Ordering::Relaxed)));
         let log_file = std::fs::File::create(&log).expect("daemon log file");
         let child = Command::new(bin("dyfosd"))
             .args(["--prefix", &self.prefix, "--domain", &self.domain, "--state-dir"])
             .arg(&self.state_dir)
             .args(extra)
-            .env("RUST_LOG", "debug")
+            .env("RUST_LOG", level)
             .stdout(Stdio::null())
             .stderr(log_file)
             .spawn()
@@ -359,6 +364,18 @@ impl RawClient {
         let pending = loan.write_from_slice(records).send().expect("send");
         self.wake.notify().expect("notify");
         wait_for("a rendezvous reply", || pending.receive().expect("receive").map(|r| *r.payload()))
+    }
+
+    /// Sends a rendezvous request and drops its pending reply at once, as a client
+    /// that gives up would.
+    /// Whether it was sent (not when the client already has as many in flight as
+    /// it may).
+    pub fn send_and_drop(&self, header: RendezvousRequestHeader, records: &[WireDelta]) -> bool {
+        let Ok(mut loan) = self.rendezvous.loan_slice_uninit(records.len()) else { return false };
+        *loan.user_header_mut() = header;
+        let sent = loan.write_from_slice(records).send();
+        let _ = self.wake.notify();
+        sent.is_ok()
     }
 
     /// Sends every request before reading any reply (at most the daemon's limit of

@@ -14,7 +14,7 @@ use dyfos_shared::wire::map::{MapRequest, MapRequestHeader, WireDelta, encode_de
 use dyfos_shared::wire::rendezvous::{Mode, RendezvousReply, RendezvousRequestHeader, WireParams};
 use dyfos_shared::wire::{ANY_VERSION, Rejection};
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
-use dyfos_tests::{PATIENCE, RawClient, Sandbox, data, without_micros};
+use dyfos_tests::{PATIENCE, RawClient, Sandbox, bin, data, without_micros};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
@@ -617,4 +617,103 @@ fn maps_past_the_limit_are_refused_and_the_others_still_serve() {
     assert_eq!(client.check(&RendezvousRequest::new(7, belief), PATIENCE).unwrap().map_version, 0);
     client.delete_map(7, None, PATIENCE).unwrap();
     assert_eq!(create(10_000), Status::Ok);
+}
+
+/// Regression (issue 11): one misbehaving client decided how much the daemon wrote.
+/// A client that drops its pending queries and sends again made the daemon log
+/// `rendezvous receive failed: ExceedsMaxBorrows` on every pass of its loop, and
+/// every reply while a killed client's listener was still registered made iceoryx2
+/// log a 5 KB warning. Both patterns run for a few seconds here; the daemon's log
+/// stays small and `dyfos stats` counts the events.
+#[test]
+fn a_misbehaving_client_cannot_flood_the_daemons_log() {
+    let sandbox = Sandbox::new("logflood");
+    let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2"]);
+    let mut client = sandbox.client();
+    let s = scenario("example.json");
+    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let good = WellFormed::start(&sandbox, 1, s.clone());
+    // Both patterns go on for at least 3 s and until the daemon has seen each at
+    // least once (at most 30 s).
+    let done = AtomicBool::new(false);
+    let brute =
+        RendezvousRequest { algorithm: Algorithm::Brute, params: s.params, ..RendezvousRequest::new(1, s.belief) };
+    let killed = std::thread::scope(|scope| {
+        // Pattern 1: slow queries sent, their pending replies dropped, sent again.
+        scope.spawn(|| {
+            let raw = RawClient::open(&sandbox);
+            let mut id = 1u64;
+            while !done.load(Ordering::SeqCst) {
+                raw.send_and_drop(brute.header(Mode::Solve, id, [0, 0]), &[]);
+                id += 1;
+                std::thread::sleep(std::time::Duration::from_micros(200));
+            }
+        });
+        // Pattern 2: a client killed while its query waits for a worker (the brute
+        // lane is busy with two queries of this test), so the daemon's reply goes to
+        // a listener that is registered but dead; then the well-formed client's
+        // replies keep coming (no new process starts meanwhile: that would clean up
+        // after the dead one at once).
+        // Ends the flood even if an assertion below fails (else the scope waits for it).
+        struct StopOnDrop<'a>(&'a AtomicBool);
+        impl Drop for StopOnDrop<'_> {
+            fn drop(&mut self) {
+                self.0.store(true, Ordering::SeqCst);
+            }
+        }
+        let _stop = StopOnDrop(&done);
+        let start = std::time::Instant::now();
+        let mut killed = 0;
+        let mut watcher = sandbox.client();
+        loop {
+            let busy: Vec<_> = (0..2)
+                .map(|_| {
+                    let mut c = sandbox.client();
+                    let brute = brute.clone();
+                    scope.spawn(move || c.rendezvous(&brute, PATIENCE).map(|_| ()))
+                })
+                .collect();
+            let mut child = dyfos_tests::ChildGuard(
+                std::process::Command::new(bin("hang-after-query"))
+                    .args([&sandbox.prefix, &sandbox.domain, "1"])
+                    .arg(data("example.json"))
+                    .stdout(std::process::Stdio::piped())
+                    .stderr(std::process::Stdio::null())
+                    .spawn()
+                    .unwrap(),
+            );
+            let mut line = String::new();
+            let stdout = child.0.stdout.take().unwrap();
+            std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut line).unwrap();
+            assert_eq!(line.trim(), "sent");
+            let _ = child.0.kill();
+            let _ = child.0.wait();
+            killed += 1;
+            for b in busy {
+                b.join().unwrap().unwrap();
+            }
+            std::thread::sleep(std::time::Duration::from_millis(500));
+            let stats = watcher.stats(PATIENCE).unwrap();
+            let seen = stats.receive_failures > 0 && stats.ipc_warnings > 0;
+            if (seen && start.elapsed().as_secs() >= 3) || start.elapsed().as_secs() >= 30 {
+                break;
+            }
+        }
+        killed
+    });
+    assert!(good.finish() > 0);
+    let stats = client.stats(PATIENCE).unwrap();
+    let log = daemon.log();
+    eprintln!("{killed} clients killed; {stats:?}; {} bytes of log", log.len());
+    assert!(killed >= 2, "only {killed} clients were killed");
+    assert!(stats.receive_failures > 0, "the flood never exceeded the daemon's borrows: {stats:?}");
+    assert!(stats.log_warnings >= stats.receive_failures, "{stats:?}");
+    assert!(stats.ipc_warnings > 0, "no iceoryx2 warning about a dead client's listener: {stats:?}");
+    assert!(stats.log_suppressed > 0, "{stats:?}");
+    assert!(log.len() < 48 * 1024, "the daemon wrote {} bytes of log:\n{}", log.len(), &log[..log.len().min(20_000)]);
+    assert!(daemon.terminate().success(), "{log}");
+    // The summaries written at exit account for what was left out.
+    let log = daemon.log();
+    assert!(log.contains(" more in the last 10 s like: "), "{log}");
+    assert!(log.len() < 64 * 1024, "the daemon wrote {} bytes of log", log.len());
 }

@@ -452,7 +452,7 @@ impl Daemon {
                     rendezvous::on_request(self, active);
                 }
                 Ok(None) => {}
-                Err(e) => warn!("rendezvous receive failed: {e:?}"),
+                Err(e) => self.receive_failed("rendezvous", e),
             }
             match self.map.receive() {
                 Ok(Some(active)) => {
@@ -460,7 +460,7 @@ impl Daemon {
                     map::on_request(self, active);
                 }
                 Ok(None) => {}
-                Err(e) => warn!("map receive failed: {e:?}"),
+                Err(e) => self.receive_failed("map", e),
             }
             match self.stats.receive() {
                 Ok(Some(active)) => {
@@ -468,7 +468,7 @@ impl Daemon {
                     stats::on_request(self, active);
                 }
                 Ok(None) => {}
-                Err(e) => warn!("stats receive failed: {e:?}"),
+                Err(e) => self.receive_failed("stats", e),
             }
             if handled == before {
                 break;
@@ -481,6 +481,19 @@ impl Daemon {
             self.check_clients();
         }
         handled
+    }
+
+    /// A receive failed, e.g. `ExceedsMaxBorrows`: a client sent more while the
+    /// daemon still holds as many of its requests as it may (they wait for a
+    /// worker). Its new requests stay in the port and are taken once those are
+    /// done; other clients are served meanwhile (iceoryx2 skips the full one). The
+    /// client decides how often this happens, so it is counted and logged under the
+    /// rate limit, never once per pass.
+    fn receive_failed(&self, service: &str, e: iceoryx2::port::ReceiveError) {
+        if let Ok(mut s) = self.shared.stats.lock() {
+            s.receive_failed();
+        }
+        warn!("{service} receive failed: {e:?} (a client sends more requests than it may have in flight; they wait)");
     }
 
     /// Abandons the running searches whose clients have gone.

@@ -15,6 +15,7 @@ pub(crate) struct Stats {
     queries_abandoned: u64,
     requests_failed: u64,
     map_requests: u64,
+    receive_failures: u64,
     errors: [u64; STATUS_SLOTS],
     latencies: Vec<u64>,
     next: usize,
@@ -28,6 +29,7 @@ impl Stats {
             queries_abandoned: 0,
             requests_failed: 0,
             map_requests: 0,
+            receive_failures: 0,
             errors: [0; STATUS_SLOTS],
             latencies: Vec::with_capacity(WINDOW),
             next: 0,
@@ -56,6 +58,11 @@ impl Stats {
         self.errors[(status as usize).min(STATUS_SLOTS - 1)] += 1;
     }
 
+    /// A receive from one of the daemon's ports failed.
+    pub(crate) fn receive_failed(&mut self) {
+        self.receive_failures += 1;
+    }
+
     /// A map request answered with success.
     pub(crate) fn map_ok(&mut self) {
         self.map_requests += 1;
@@ -77,6 +84,7 @@ pub(super) fn on_request(
     active: iceoryx2::active_request::ActiveRequest<super::Ipc, StatsRequest, (), StatsReply, ()>,
 ) {
     let request = *active.payload();
+    let log = dyfos_client::logging::counters();
     let (queued, running) = daemon.shared.queue.lock().map_or((0, 0), |q| (q.queued() as u64, q.running() as u64));
     let reply = match daemon.shared.stats.lock() {
         Ok(s) => StatsReply {
@@ -94,6 +102,10 @@ pub(super) fn on_request(
             latency_samples: s.latencies.len() as u64,
             errors_by_code: s.errors,
             queries_abandoned: s.queries_abandoned,
+            receive_failures: s.receive_failures,
+            log_warnings: log.warnings,
+            ipc_warnings: log.ipc_warnings,
+            log_suppressed: log.suppressed,
         },
         Err(_) => StatsReply { request_id: request.request_id, ..StatsReply::default() },
     };

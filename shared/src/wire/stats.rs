@@ -66,6 +66,18 @@ pub struct StatsReply {
     /// or dropped its pending response) before the answer; they got no reply.
     /// Last, so the fields before keep their offsets.
     pub queries_abandoned: u64,
+    /// Times a receive from the daemon's ports failed, e.g. `ExceedsMaxBorrows`
+    /// when a client keeps sending while its earlier requests still wait: the
+    /// requests stay where they are and are taken later.
+    pub receive_failures: u64,
+    /// Warnings and errors the daemon's log saw (written or not).
+    pub log_warnings: u64,
+    /// Of those, iceoryx2's own (e.g. one per notification while a dead client's
+    /// listener is still registered).
+    pub ipc_warnings: u64,
+    /// Log lines at `info` and above left out by the rate limit (the log says how
+    /// many after each 10 s window).
+    pub log_suppressed: u64,
 }
 
 impl Default for StatsReply {
@@ -85,6 +97,10 @@ impl Default for StatsReply {
             latency_samples: 0,
             errors_by_code: [0; STATUS_SLOTS],
             queries_abandoned: 0,
+            receive_failures: 0,
+            log_warnings: 0,
+            ipc_warnings: 0,
+            log_suppressed: 0,
         }
     }
 }
@@ -118,6 +134,14 @@ pub struct DaemonStats {
     pub latency_samples: u64,
     /// Non-zero error counts by code.
     pub errors: Vec<(Status, u64)>,
+    /// Failed receives from the daemon's ports (a client sending past its limit).
+    pub receive_failures: u64,
+    /// Warnings and errors the daemon's log saw.
+    pub log_warnings: u64,
+    /// Of those, iceoryx2's own.
+    pub ipc_warnings: u64,
+    /// Log lines left out by the rate limit.
+    pub log_suppressed: u64,
 }
 
 impl From<&StatsReply> for DaemonStats {
@@ -143,6 +167,10 @@ impl From<&StatsReply> for DaemonStats {
             latency_micros: r.latency_micros,
             latency_samples: r.latency_samples,
             errors,
+            receive_failures: r.receive_failures,
+            log_warnings: r.log_warnings,
+            ipc_warnings: r.ipc_warnings,
+            log_suppressed: r.log_suppressed,
         }
     }
 }
@@ -166,6 +194,8 @@ impl DaemonStats {
             "workers": self.workers,
             "latency_us": {"p50": p50, "p90": p90, "p99": p99, "max": max, "samples": self.latency_samples},
             "errors": errors,
+            "receive_failures": self.receive_failures,
+            "log": {"warnings": self.log_warnings, "ipc_warnings": self.ipc_warnings, "suppressed": self.log_suppressed},
         })
     }
 }
