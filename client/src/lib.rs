@@ -28,6 +28,7 @@
 mod client;
 mod error;
 
+pub mod cli;
 pub mod eval;
 pub mod logging;
 pub mod mission;

@@ -129,3 +129,47 @@ fn no_feasible_pose_exits_3() {
     assert_eq!(out.status.code(), Some(3));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no_feasible_pose"));
 }
+
+/// Regression (issue 11): `dyfos solve` printed `"x": [1.0, 3.94e-05, -7.08e-06, 2.85]`
+/// and `dyfos eval --x` refused it (clap took `-7.08e-06` for a flag). Every number a
+/// command prints is now taken back by every numeric flag.
+#[test]
+fn numbers_solve_prints_are_taken_back_by_eval() {
+    let path = example();
+    let path = path.to_str().unwrap();
+    for (algo, seed) in [("dyfos", "0"), ("dyfos", "3"), ("random", "1"), ("center", "0"), ("dyfos-scipy", "2")] {
+        let solved = dyfos(&["solve", path, "--algo", algo, "--seed", seed]);
+        assert!(solved.status.success(), "{}", String::from_utf8_lossy(&solved.stderr));
+        let answer: Value = serde_json::from_slice(&solved.stdout).unwrap();
+        // The numbers as printed, character for character.
+        let x: Vec<String> = answer["x"].as_array().unwrap().iter().map(Value::to_string).collect();
+        let mut args = vec!["eval", path, "--x"];
+        args.extend(x.iter().map(String::as_str));
+        let evaluated = dyfos(&args);
+        assert!(evaluated.status.success(), "eval --x {x:?}: {}", String::from_utf8_lossy(&evaluated.stderr));
+        let v: Value = serde_json::from_slice(&evaluated.stdout).unwrap();
+        assert_eq!(v["cost"], answer["cost"], "{algo} seed {seed}: the same x gives the same E");
+    }
+    // Printed forms the search may not have produced here: negative exponents, -0.0,
+    // the extremes of f64.
+    let printed = ["-7.08e-06", "-0.0", "-5e-324", "-1.7976931348623157e308", "1e300", "-2.2250738585072014e-308"];
+    for value in printed {
+        let evaluated = dyfos(&["eval", path, "--x", "1.0", "3.94e-05", value, "2.85"]);
+        assert!(evaluated.status.success(), "--x ... {value}: {}", String::from_utf8_lossy(&evaluated.stderr));
+        let v: Value = serde_json::from_slice(&evaluated.stdout).unwrap();
+        assert_eq!(v["x"][2].as_f64().unwrap().to_bits(), value.parse::<f64>().unwrap().to_bits(), "{v}");
+    }
+    // The other numeric flags parse such numbers too (the daemon is absent here, so
+    // the command fails later, with exit 1, not on its arguments with exit 2).
+    for args in [
+        vec!["map", "create", "7", "--bounds", "-1e1", "-1.0e+01", "1e1", "10", "--sun", "-0.0", "-2.1e-3"],
+        vec!["stats", "--timeout", "1e-3"],
+    ] {
+        let mut full = args.clone();
+        full.extend(["--prefix", "dyfos-cli-test-nodaemon/"]);
+        let out = dyfos(&full);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains("no dyfosd"), "{args:?}: {stderr}");
+    }
+}

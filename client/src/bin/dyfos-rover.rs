@@ -35,13 +35,13 @@ struct Cli {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Simulated seconds per wall second; 0 runs as fast as possible.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 20.0)]
     time_scale: f64,
     /// Longest wait for a measurement at a waypoint, wall seconds.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 10.0)]
     measurement_timeout: f64,
     /// Longest wait at the start for a viewer, wall seconds.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 10.0)]
     viewer_timeout: f64,
     /// Drive without a viewer (no rendezvous, no measurements): the baseline.
     #[arg(long)]
@@ -89,5 +89,16 @@ fn main() -> ExitCode {
             eprintln!("dyfos-rover: {e:#}");
             ExitCode::from(1)
         }
+    }
+}
+
+#[cfg(test)]
+mod cli_tests {
+    /// Every number a dyfos command prints can be pasted back, `-7.08e-06` included.
+    #[test]
+    fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
+        let refusing =
+            dyfos_client::cli::numeric_flags_refusing_signs(&<super::Cli as clap::CommandFactory>::command());
+        assert!(refusing.is_empty(), "set allow_hyphen_values on {refusing:?}");
     }
 }

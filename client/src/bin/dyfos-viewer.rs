@@ -47,22 +47,22 @@ struct Cli {
     #[arg(long, default_value_t = 1)]
     map_id: u64,
     /// Simulated seconds per wall second; 0 runs as fast as possible.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 20.0)]
     time_scale: f64,
     /// Longest wait for the daemon's answer, wall seconds.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 30.0)]
     query_timeout: f64,
     /// Deadline given to the daemon per query, seconds (the best pose so far when it passes).
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 20.0)]
     deadline: f64,
     /// Longest wait for the rover to reach a rendezvous, wall seconds.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 10.0)]
     observe_timeout: f64,
     /// Exit after this many wall seconds without a word from the rover.
-    #[arg(long, default_value_t = 120.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 120.0)]
     idle_timeout: f64,
     /// Longest wait for the daemon at start, wall seconds.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 10.0)]
     connect_timeout: f64,
     /// Write every event as a JSON line to this file.
     #[arg(long)]
@@ -138,5 +138,16 @@ fn main() -> ExitCode {
             eprintln!("dyfos-viewer: {e:#}");
             ExitCode::from(1)
         }
+    }
+}
+
+#[cfg(test)]
+mod cli_tests {
+    /// Every number a dyfos command prints can be pasted back, `-7.08e-06` included.
+    #[test]
+    fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
+        let refusing =
+            dyfos_client::cli::numeric_flags_refusing_signs(&<super::Cli as clap::CommandFactory>::command());
+        assert!(refusing.is_empty(), "set allow_hyphen_values on {refusing:?}");
     }
 }

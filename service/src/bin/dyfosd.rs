@@ -145,6 +145,8 @@ fn main() -> ExitCode {
     match Daemon::create(&config) {
         Ok(daemon) => {
             serve(daemon);
+            // Say how many lines the rate limit left out in the last window.
+            dyfos_client::logging::flush();
             ExitCode::SUCCESS
         }
         Err(e) => {
@@ -158,6 +160,12 @@ fn main() -> ExitCode {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
+        let refusing = dyfos_client::cli::numeric_flags_refusing_signs(&<Cli as clap::CommandFactory>::command());
+        assert!(refusing.is_empty(), "set allow_hyphen_values on {refusing:?}");
+    }
 
     fn cli(args: &[&str]) -> Cli {
         Cli::try_parse_from(std::iter::once("dyfosd").chain(args.iter().copied())).unwrap()

@@ -28,16 +28,16 @@ use std::time::{Duration, Instant};
 #[derive(Debug, clap::Args)]
 pub struct LatencyArgs {
     /// Seconds each configuration runs.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 2.0)]
     seconds: f64,
     /// Closed loop: numbers of client processes, each sending back to back.
     #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16")]
     clients: Vec<usize>,
     /// Open loop: null-query (and floor) rates, requests per second over all clients.
-    #[arg(long, value_delimiter = ',', default_value = "1000,10000")]
+    #[arg(allow_hyphen_values = true, long, value_delimiter = ',', default_value = "1000,10000")]
     null_rates: Vec<f64>,
     /// Open loop: `dyfos` query rates, per second over all clients.
-    #[arg(long, value_delimiter = ',', default_value = "250,500")]
+    #[arg(allow_hyphen_values = true, long, value_delimiter = ',', default_value = "250,500")]
     dyfos_rates: Vec<f64>,
     /// Open loop: client processes sharing the rate.
     #[arg(long, default_value_t = 4)]
@@ -60,7 +60,7 @@ pub struct LatencyArgs {
     daemon_args: Vec<String>,
     /// Mixed run: null-query rate (one client, open loop) while `--mixed-dyfos-clients`
     /// send `dyfos` queries back to back; 0 skips it.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 1000.0)]
     mixed_null_rate: f64,
     /// Mixed run: `dyfos` clients keeping the workers busy.
     #[arg(long, default_value_t = 4)]
@@ -89,9 +89,9 @@ pub struct WorkerArgs {
     #[arg(long, value_parser = parse_workload)]
     workload: Workload,
     /// Requests per second of this client; 0 for a closed loop.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 0.0)]
     rate: f64,
-    #[arg(long)]
+    #[arg(allow_hyphen_values = true, long)]
     seconds: f64,
     #[arg(long)]
     seed: u64,

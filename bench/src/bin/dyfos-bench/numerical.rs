@@ -49,7 +49,7 @@ pub struct NumericalArgs {
     #[arg(long, default_value_t = 5)]
     scaling_maps: usize,
     /// Scaling: cell side of the occupancy-grid version of each map, m; 0 skips it.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 0.1)]
     voxel_resolution: f64,
     /// Also write each evaluated map as a scenario file (`map_NN.json`, for `dyfos solve`) here.
     #[arg(long, value_name = "DIR")]

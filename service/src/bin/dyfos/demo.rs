@@ -39,7 +39,7 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 1)]
     pub seeds: u64,
     /// Simulated seconds per wall second; 0 runs as fast as the computer allows.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 20.0)]
     pub time_scale: f64,
     /// Directory for the SVGs, a JSON summary and the processes' logs.
     #[arg(long, default_value = "dyfos-demo")]

@@ -38,7 +38,7 @@ pub struct EvalArgs {
     /// Scenario file (SPEC §11 JSON).
     pub scenario: PathBuf,
     /// The candidate: ρ (m), ψ, φ, ψ_v (rad).
-    #[arg(long, num_args = 4, value_names = ["RHO", "PSI", "PHI", "YAW"], allow_negative_numbers = true, required = true)]
+    #[arg(long, num_args = 4, value_names = ["RHO", "PSI", "PHI", "YAW"], allow_hyphen_values = true, required = true)]
     pub x: Vec<f64>,
     /// Model file of the learned SDSMM (written by `dyfos train`); implies `"model": "learned"`.
     #[arg(long, value_name = "FILE")]

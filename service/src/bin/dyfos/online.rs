@@ -19,7 +19,7 @@ pub struct DaemonArgs {
     #[arg(long)]
     pub domain: Option<String>,
     /// Seconds to wait for the daemon's reply.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 60.0)]
     pub timeout: f64,
 }
 
@@ -72,10 +72,10 @@ pub enum MapCommand {
         /// Map id.
         id: MapId,
         /// Bounds: X_MIN Y_MIN X_MAX Y_MAX.
-        #[arg(long, num_args = 4, allow_negative_numbers = true, required = true)]
+        #[arg(long, num_args = 4, allow_hyphen_values = true, required = true)]
         bounds: Vec<f64>,
         /// Sun: ELEVATION AZIMUTH (rad).
-        #[arg(long, num_args = 2, allow_negative_numbers = true, required = true)]
+        #[arg(long, num_args = 2, allow_hyphen_values = true, required = true)]
         sun: Vec<f64>,
         #[command(flatten)]
         daemon: DaemonArgs,

@@ -39,13 +39,13 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 512)]
     pub batch: usize,
     /// Adam's initial learning rate.
-    #[arg(long, default_value_t = 3e-3)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 3e-3)]
     pub lr: f64,
     /// Stop after this many epochs without a better validation NLL.
     #[arg(long, default_value_t = 25)]
     pub patience: usize,
     /// Fraction of the data held out for validation (the last samples).
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(allow_hyphen_values = true, long, default_value_t = 0.2)]
     pub validation: f64,
     /// Seed of the initial weights and the batch order.
     #[arg(long, default_value_t = 0)]
