@@ -17,6 +17,10 @@
 //! validated type before use. The daemon creates the services with its own limits;
 //! clients only open them.
 //!
+//! For clients in other languages, `docs/wire.md` in the repository documents every
+//! type's name, size and field offsets, every code and default, and the protocol
+//! rules; `tests/tests/wire_doc.rs` checks it against these definitions.
+//!
 //! ```
 //! use dyfos_shared::wire::{ServiceNames, Status};
 //!

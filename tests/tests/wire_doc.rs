@@ -1,0 +1,809 @@
+//! `docs/wire.md` is the wire protocol for clients written in other languages. These
+//! tests read its tables and check every documented type name, size, alignment,
+//! field offset and C type, every status, tag, flag, operation, mode, algorithm,
+//! model and stop code, every parameter bit and SPEC default, and every limit
+//! against the Rust definitions, in both directions: a documented entry Rust does
+//! not have fails, and so does a Rust entry the document lacks. The services'
+//! types and iceoryx2 limits are checked against a running `dyfosd`.
+//!
+//! The table format is described in the document's last section: a table is found
+//! by the text of its first header cell, and a field table belongs to the `###`
+//! heading above it. On a mismatch the tests print the rows they expected.
+
+use dyfos_service::daemon::{CLIENT_CHECK, DaemonConfig, HOUSEKEEPING};
+use dyfos_shared::answer::{Algorithm, StopReason};
+use dyfos_shared::limits::{
+    DETAIL_LEN, MAX_DEADLINE_MICROS, MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS, MAX_MAPS, MAX_OBSTACLES,
+    MAX_OCCUPIED_VOXELS, MAX_PENDING_UPLOADS, MAX_PERIMETER_POINTS, MAX_PREFIX_LEN, MAX_UPLOAD_CHUNKS,
+};
+use dyfos_shared::params::{ModelKind, Params};
+use dyfos_shared::prelude::na;
+use dyfos_shared::wire::map::{
+    FLAG_REPLACE, MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, decode_deltas, encode_deltas, op, tag,
+};
+use dyfos_shared::wire::rendezvous::{Mode, RendezvousReply, RendezvousRequest, RendezvousRequestHeader, WireParams};
+use dyfos_shared::wire::stats::{STATUS_SLOTS, StatsReply, StatsRequest};
+use dyfos_shared::wire::{ANY_VERSION, DEFAULT_PREFIX, Detail, ServiceNames, Status};
+use dyfos_shared::world::{AxisBox, Bounds, MapDelta, Obstacle, Sun, VerticalCylinder};
+use dyfos_tests::Sandbox;
+use iceoryx2::service::static_config::message_type_details::{TypeDetail, TypeVariant};
+use std::collections::BTreeMap;
+
+const DOC: &str = include_str!("../../docs/wire.md");
+
+/// One Markdown table of the document.
+#[derive(Debug)]
+struct Table {
+    /// The nearest `#`…`###` heading above it, without the `#`s.
+    heading: String,
+    /// Header cells.
+    header: Vec<String>,
+    /// Body rows, cells trimmed.
+    rows: Vec<Vec<String>>,
+    /// 1-based line of its header, for messages.
+    line: usize,
+}
+
+/// Every table of `doc` outside code fences.
+fn tables(doc: &str) -> Vec<Table> {
+    let mut out = Vec::new();
+    let mut heading = String::new();
+    let mut fenced = false;
+    let mut current: Option<Table> = None;
+    for (i, raw) in doc.lines().enumerate() {
+        let line = raw.trim();
+        if line.starts_with("```") {
+            fenced = !fenced;
+        }
+        if !fenced && line.starts_with('|') {
+            let cells = cells(line);
+            match &mut current {
+                None => {
+                    current = Some(Table { heading: heading.clone(), header: cells, rows: Vec::new(), line: i + 1 })
+                }
+                Some(t) if cells.iter().all(|c| c.chars().all(|ch| matches!(ch, '-' | ':'))) && t.rows.is_empty() => {}
+                Some(t) => {
+                    assert_eq!(
+                        cells.len(),
+                        t.header.len(),
+                        "docs/wire.md line {}: {} cells, the table's header has {}",
+                        i + 1,
+                        cells.len(),
+                        t.header.len()
+                    );
+                    t.rows.push(cells);
+                }
+            }
+            continue;
+        }
+        out.extend(current.take());
+        if !fenced && line.starts_with('#') {
+            heading = line.trim_start_matches('#').trim().to_string();
+        }
+    }
+    out.extend(current.take());
+    out
+}
+
+/// The cells of a table row: split at every `|` that is not written `\\|`.
+fn cells(line: &str) -> Vec<String> {
+    let inner = line.strip_prefix('|').unwrap_or(line);
+    let inner = inner.strip_suffix('|').unwrap_or(inner);
+    let mut out = vec![String::new()];
+    let mut chars = inner.chars().peekable();
+    while let Some(c) = chars.next() {
+        match c {
+            '\\' if chars.peek() == Some(&'|') => {
+                out.last_mut().expect("a cell").push('|');
+                chars.next();
+            }
+            '|' => out.push(String::new()),
+            c => out.last_mut().expect("a cell").push(c),
+        }
+    }
+    out.into_iter().map(|c| c.trim().to_string()).collect()
+}
+
+/// The tables whose first header cell is `first`.
+fn tables_of<'a>(all: &'a [Table], first: &str) -> Vec<&'a Table> {
+    all.iter().filter(|t| t.header[0] == first).collect()
+}
+
+/// The one table whose first header cell is `first`.
+fn table<'a>(all: &'a [Table], first: &str) -> &'a Table {
+    let found = tables_of(all, first);
+    assert_eq!(found.len(), 1, "docs/wire.md must have exactly one table whose first column is `{first}`");
+    found[0]
+}
+
+/// The text of the first `code` span of `cell`, or the cell itself.
+fn code(cell: &str) -> &str {
+    let mut parts = cell.split('`');
+    match (parts.next(), parts.next()) {
+        (Some(_), Some(inner)) => inner,
+        _ => cell.trim(),
+    }
+}
+
+/// The integer at the start of `cell` (decimal, or hex with `0x`; `_` ignored).
+fn int(cell: &str) -> u64 {
+    let token: String = code(cell).split_whitespace().next().unwrap_or("").replace('_', "");
+    let parsed = match token.strip_prefix("0x") {
+        Some(hex) => u64::from_str_radix(hex, 16),
+        None => token.parse(),
+    };
+    parsed.unwrap_or_else(|_| panic!("docs/wire.md: `{cell}` does not start with an integer"))
+}
+
+/// Compares documented rows with expected ones (as strings), printing both on a
+/// mismatch so the document is easy to fix.
+fn same_rows(what: &str, table: &Table, documented: Vec<String>, expected: Vec<String>) {
+    assert!(
+        documented == expected,
+        "docs/wire.md line {} ({what}) differs from the Rust definitions.\n  documented:\n    {}\n  expected:\n    {}",
+        table.line,
+        documented.join("\n    "),
+        expected.join("\n    ")
+    );
+}
+
+// ----- types and fields ---------------------------------------------------------
+
+/// One field of a wire type, from Rust.
+struct Field {
+    name: &'static str,
+    offset: usize,
+    rust_type: &'static str,
+}
+
+/// One wire type, from Rust and iceoryx2.
+struct WireType {
+    type_name: String,
+    size: usize,
+    align: usize,
+    fields: Vec<Field>,
+}
+
+/// The field names `Debug` prints for `value` (every field, in declaration order):
+/// so a field added to a wire type and not to [`wire_types`] fails the test.
+fn debug_fields(value: &impl std::fmt::Debug) -> Vec<String> {
+    format!("{value:#?}")
+        .lines()
+        .filter_map(|l| l.strip_prefix("    "))
+        .filter(|l| !l.starts_with(' '))
+        .filter_map(|l| l.split_once(':').map(|(name, _)| name.to_string()))
+        .collect()
+}
+
+macro_rules! wire_type {
+    ($t:ty { $($f:ident),* $(,)? }) => {{
+        let value = <$t>::default();
+        // What iceoryx2 itself compares when a port opens the service.
+        let detail = TypeDetail::new::<$t>(TypeVariant::FixedSize);
+        let fields = vec![$(Field {
+            name: stringify!($f),
+            offset: std::mem::offset_of!($t, $f),
+            rust_type: std::any::type_name_of_val(&value.$f),
+        }),*];
+        let listed: Vec<String> = fields.iter().map(|f| f.name.to_string()).collect();
+        assert_eq!(listed, debug_fields(&value), "this test's field list of {} is out of date", stringify!($t));
+        assert_eq!((detail.size(), detail.alignment()), (size_of::<$t>(), align_of::<$t>()));
+        WireType { type_name: detail.type_name().to_string(), size: detail.size(), align: detail.alignment(), fields }
+    }};
+}
+
+/// Every payload and header type of the daemon's services.
+fn wire_types() -> Vec<WireType> {
+    vec![
+        wire_type!(RendezvousRequestHeader {
+            request_id,
+            map_id,
+            expected_version,
+            seed,
+            budget,
+            deadline_micros,
+            mean,
+            cov,
+            params,
+            algorithm,
+            mode,
+            reply_to
+        }),
+        wire_type!(WireParams {
+            rover_radius,
+            marker_size,
+            marker_height,
+            viewer_radius,
+            safety_margin,
+            z_min,
+            z_max,
+            camera_pitch,
+            t_vs,
+            f_h,
+            f_v,
+            rho_min,
+            rho_max,
+            kappa,
+            lambda,
+            perimeter_points,
+            model,
+            set,
+            reserved
+        }),
+        wire_type!(RendezvousReply {
+            status,
+            algorithm,
+            stop,
+            mode,
+            request_id,
+            map_version,
+            x,
+            cost,
+            sensor_position,
+            sensor_quaternion,
+            viewer_position,
+            viewer_yaw,
+            r,
+            posterior,
+            evaluations,
+            micros,
+            daemon_micros,
+            error_index,
+            detail
+        }),
+        wire_type!(WireDelta { tag, flag, id, reserved, values, cell }),
+        wire_type!(MapRequestHeader {
+            op,
+            flags,
+            map_id,
+            expected_version,
+            request_id,
+            upload_id,
+            chunk_index,
+            chunk_count,
+            bounds,
+            sun,
+            reply_to
+        }),
+        wire_type!(MapReplyHeader {
+            status,
+            chunk_index,
+            chunk_count,
+            reserved,
+            request_id,
+            map_id,
+            version,
+            bounds,
+            sun,
+            error_index,
+            detail
+        }),
+        wire_type!(StatsRequest { request_id, reply_to }),
+        wire_type!(StatsReply {
+            request_id,
+            pid,
+            uptime_micros,
+            queries_served,
+            requests_failed,
+            map_requests,
+            maps,
+            queued,
+            running,
+            workers,
+            latency_micros,
+            latency_samples,
+            errors_by_code,
+            queries_abandoned
+        }),
+        wire_type!(Detail { len, bytes }),
+    ]
+}
+
+/// The Rust type a documented C type stands for, as [`short_rust_type`] prints it:
+/// `double[3][3]` is `[[f64; 3]; 3]`, a struct is its name.
+fn rust_type_of_c(c: &str) -> String {
+    let base_end = c.find('[').unwrap_or(c.len());
+    let mut t = match &c[..base_end] {
+        "uint8_t" => "u8",
+        "uint32_t" => "u32",
+        "int64_t" => "i64",
+        "uint64_t" => "u64",
+        "double" => "f64",
+        other => other,
+    }
+    .to_string();
+    let dims: Vec<&str> = c[base_end..].split(['[', ']']).filter(|s| !s.is_empty()).collect();
+    for d in dims.iter().rev() {
+        t = format!("[{t}; {d}]");
+    }
+    t
+}
+
+/// A Rust type name with every path shortened to its last segment
+/// (`[dyfos_shared::wire::Detail; 2]` is `[Detail; 2]`).
+fn short_rust_type(t: &str) -> String {
+    let mut out = String::new();
+    let mut word = String::new();
+    for c in t.chars().chain(std::iter::once(' ')) {
+        if c.is_alphanumeric() || c == '_' || c == ':' {
+            word.push(c);
+        } else {
+            out.push_str(word.rsplit("::").next().unwrap_or(""));
+            word.clear();
+            out.push(c);
+        }
+    }
+    out.pop();
+    out
+}
+
+#[test]
+fn documented_types_sizes_and_fields_are_the_rust_ones() {
+    let all = tables(DOC);
+    let types = wire_types();
+    let summary = table(&all, "type name");
+    let documented: Vec<String> =
+        summary.rows.iter().map(|r| format!("| `{}` | {} | {} |", code(&r[0]), int(&r[1]), int(&r[2]))).collect();
+    let expected: Vec<String> =
+        types.iter().map(|t| format!("| `{}` | {} | {} |", t.type_name, t.size, t.align)).collect();
+    same_rows("type name, size, align", summary, documented, expected);
+
+    let field_tables = tables_of(&all, "offset");
+    let documented_types: Vec<String> = field_tables.iter().map(|t| code(&t.heading).to_string()).collect();
+    let expected_types: Vec<String> = types.iter().map(|t| t.type_name.clone()).collect();
+    assert_eq!(documented_types, expected_types, "docs/wire.md: one field table per type, under `### `type name``");
+    for (t, doc) in types.iter().zip(field_tables) {
+        assert_eq!(&doc.header[..3], ["offset", "field", "C type"], "docs/wire.md line {}", doc.line);
+        let documented: Vec<String> = doc
+            .rows
+            .iter()
+            .map(|r| format!("| {} | `{}` | `{}` |", int(&r[0]), code(&r[1]), rust_type_of_c(code(&r[2]))))
+            .collect();
+        let expected: Vec<String> = t
+            .fields
+            .iter()
+            .map(|f| format!("| {} | `{}` | `{}` |", f.offset, f.name, short_rust_type(f.rust_type)))
+            .collect();
+        same_rows(&format!("fields of {}", t.type_name), doc, documented, expected);
+    }
+}
+
+// ----- codes ----------------------------------------------------------------------
+
+/// Documented `(number, name)` pairs of the table whose first column is `first`.
+fn codes<'a>(all: &'a [Table], first: &str) -> (&'a Table, Vec<(u64, String)>) {
+    let t = table(all, first);
+    (t, t.rows.iter().map(|r| (int(&r[0]), code(&r[1]).to_string())).collect())
+}
+
+fn rows(pairs: &[(u64, String)]) -> Vec<String> {
+    pairs.iter().map(|(n, name)| format!("| {n} | `{name}` |")).collect()
+}
+
+/// A valid rendezvous request header, to vary one field of.
+fn valid_rendezvous_header() -> RendezvousRequestHeader {
+    let belief =
+        dyfos_shared::posterior::Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]])
+            .expect("belief");
+    RendezvousRequest::new(1, belief).header(Mode::Solve, 1, [0, 0])
+}
+
+#[test]
+fn documented_status_codes_are_the_rust_ones() {
+    let all = tables(DOC);
+    let t = table(&all, "status");
+    assert_eq!(&t.header[..3], ["status", "name", "retryable"]);
+    let yes_no = |b: bool| if b { "yes" } else { "no" };
+    let documented = t
+        .rows
+        .iter()
+        .map(|r| format!("| {} | `{}` | {} |", int(&r[0]), code(&r[1]), r[2].split_whitespace().next().unwrap_or("")))
+        .collect();
+    let expected = Status::ALL
+        .iter()
+        .map(|s| format!("| {} | `{}` | {} |", *s as u32, s.name(), yes_no(s.is_retryable())))
+        .collect();
+    same_rows("status codes", t, documented, expected);
+}
+
+/// The tag constant name of the first record of `delta`: exhaustive, so a new kind
+/// of delta fails to compile here until it is documented.
+fn tag_name(delta: &MapDelta) -> &'static str {
+    match delta {
+        MapDelta::UpsertObstacle { obstacle: Obstacle::Cylinder(_), .. } => "UPSERT_CYLINDER",
+        MapDelta::UpsertObstacle { obstacle: Obstacle::Box(_), .. } => "UPSERT_BOX",
+        MapDelta::RemoveObstacle { .. } => "REMOVE_OBSTACLE",
+        MapDelta::SetVoxels { .. } => "VOXEL_RUN",
+        MapDelta::SetSun(_) => "SET_SUN",
+        MapDelta::SetBounds(_) => "SET_BOUNDS",
+        MapDelta::Clear => "CLEAR",
+    }
+}
+
+#[test]
+fn documented_delta_tags_and_flags_are_the_rust_ones() {
+    let all = tables(DOC);
+    let (t, documented) = codes(&all, "tag");
+    let expected = vec![
+        (tag::UPSERT_CYLINDER, "UPSERT_CYLINDER"),
+        (tag::UPSERT_BOX, "UPSERT_BOX"),
+        (tag::REMOVE_OBSTACLE, "REMOVE_OBSTACLE"),
+        (tag::VOXEL_RUN, "VOXEL_RUN"),
+        (tag::VOXEL_CELL, "VOXEL_CELL"),
+        (tag::SET_SUN, "SET_SUN"),
+        (tag::SET_BOUNDS, "SET_BOUNDS"),
+        (tag::CLEAR, "CLEAR"),
+    ];
+    let expected: Vec<(u64, String)> = expected.into_iter().map(|(n, s)| (u64::from(n), s.to_string())).collect();
+    same_rows("delta tags", t, rows(&documented), rows(&expected));
+    let by_name: BTreeMap<&str, u32> = documented.iter().map(|(n, s)| (s.as_str(), *n as u32)).collect();
+
+    // Every kind of delta encodes with its documented tag (a voxel run's cells too).
+    let cylinder = VerticalCylinder { center: na::Point2::new(1.0, 2.0), radius: 0.5, height: 2.0 };
+    let crate_ = AxisBox { min: na::Point3::new(0.0, 0.0, 0.0), max: na::Point3::new(1.0, 1.0, 1.0) };
+    let every_kind = [
+        MapDelta::UpsertObstacle { id: 1, obstacle: Obstacle::Cylinder(cylinder) },
+        MapDelta::UpsertObstacle { id: 2, obstacle: Obstacle::Box(crate_) },
+        MapDelta::RemoveObstacle { id: 1 },
+        MapDelta::SetVoxels { resolution: 0.5, origin: na::Point3::origin(), cells: vec![[1, 2, 3]], occupied: true },
+        MapDelta::SetSun(Sun::new(0.3, 1.0).expect("sun")),
+        MapDelta::SetBounds(Bounds::new([-5.0, -5.0, 5.0, 5.0]).expect("bounds")),
+        MapDelta::Clear,
+    ];
+    for delta in &every_kind {
+        let records = encode_deltas(std::slice::from_ref(delta));
+        assert_eq!(records[0].tag, by_name[tag_name(delta)], "{delta:?}");
+        for cell in &records[1..] {
+            assert_eq!(cell.tag, by_name["VOXEL_CELL"], "{delta:?}");
+        }
+    }
+    // A record with an undocumented tag is refused; a documented one is a delta (a
+    // cell only inside a run).
+    for t in 0..=256u32 {
+        let result = decode_deltas(&[WireDelta { tag: t, ..WireDelta::default() }]);
+        let known = by_name.values().any(|v| *v == t);
+        match result {
+            Ok(_) => assert!(known, "tag {t} decodes but is not documented"),
+            Err(e) if e.message.contains("outside a run") => assert_eq!(t, by_name["VOXEL_CELL"]),
+            Err(e) => assert!(!known && e.message.contains("is not a delta"), "tag {t}: {e}"),
+        }
+    }
+
+    // Flags: the upload's replace bit and a voxel run's occupied/free.
+    let f = table(&all, "flag");
+    let documented: Vec<String> =
+        f.rows.iter().map(|r| format!("| {} | `{}` | `{}` |", int(&r[0]), code(&r[1]), code(&r[2]))).collect();
+    let run = |occupied| {
+        encode_deltas(&[MapDelta::SetVoxels { resolution: 1.0, origin: na::Point3::origin(), cells: vec![], occupied }])
+            [0]
+        .flag
+    };
+    let expected = vec![
+        format!("| {FLAG_REPLACE} | `FLAG_REPLACE` | `MapRequestHeader.flags` |"),
+        format!("| {} | `free` | `WireDelta.flag` |", run(false)),
+        format!("| {} | `occupied` | `WireDelta.flag` |", run(true)),
+    ];
+    same_rows("flags", f, documented, expected);
+    let upload = MapRequest::Upload {
+        map: 1,
+        upload_id: 1,
+        chunk_index: 0,
+        chunk_count: 1,
+        replace: false,
+        expected_version: None,
+        bounds: Bounds::new([-5.0, -5.0, 5.0, 5.0]).expect("bounds"),
+        sun: Sun::new(0.3, 1.0).expect("sun"),
+        deltas: vec![],
+    }
+    .header(1, [0, 0]);
+    for bit in 0..32 {
+        let accepted = MapRequest::decode(&MapRequestHeader { flags: 1 << bit, ..upload }, &[]).is_ok();
+        assert_eq!(accepted, 1 << bit == FLAG_REPLACE, "upload flag bit {bit}");
+    }
+    for flag in 0..=16 {
+        let mut records = encode_deltas(&[MapDelta::SetVoxels {
+            resolution: 1.0,
+            origin: na::Point3::origin(),
+            cells: vec![],
+            occupied: false,
+        }]);
+        records[0].flag = flag;
+        assert_eq!(decode_deltas(&records).is_ok(), flag == run(false) || flag == run(true), "voxel run flag {flag}");
+    }
+}
+
+#[test]
+fn documented_operations_modes_algorithms_models_and_stops_are_the_rust_ones() {
+    let all = tables(DOC);
+
+    let (t, documented) = codes(&all, "op");
+    let expected: Vec<(u64, String)> = [
+        (op::CREATE, "CREATE"),
+        (op::APPLY, "APPLY"),
+        (op::UPLOAD, "UPLOAD"),
+        (op::SNAPSHOT, "SNAPSHOT"),
+        (op::DELETE, "DELETE"),
+    ]
+    .into_iter()
+    .map(|(n, s)| (u64::from(n), s.to_string()))
+    .collect();
+    same_rows("map operations", t, rows(&documented), rows(&expected));
+    for o in 0..=256u32 {
+        let refused = MapRequest::decode(&MapRequestHeader { op: o, ..MapRequestHeader::default() }, &[])
+            .is_err_and(|e| e.message.contains("is not a map operation"));
+        assert_eq!(refused, !documented.iter().any(|(n, _)| *n == u64::from(o)), "op {o}");
+    }
+
+    let (t, documented) = codes(&all, "mode");
+    let mut decoded = Vec::new();
+    for m in 0..=256u32 {
+        let header = RendezvousRequestHeader { mode: m, ..valid_rendezvous_header() };
+        if let Ok((_, mode)) = RendezvousRequest::decode(&header, &[]) {
+            let name = match mode {
+                Mode::Solve => "solve",
+                Mode::Check => "check",
+            };
+            decoded.push((u64::from(m), name.to_string()));
+        }
+    }
+    same_rows("modes", t, rows(&documented), rows(&decoded));
+
+    let (t, documented) = codes(&all, "algorithm");
+    let mut decoded = Vec::new();
+    for a in 0..=256u32 {
+        let header = RendezvousRequestHeader { algorithm: a, ..valid_rendezvous_header() };
+        if let Ok((request, _)) = RendezvousRequest::decode(&header, &[]) {
+            decoded.push((u64::from(a), request.algorithm.name().to_string()));
+        }
+    }
+    let from_all: Vec<(u64, String)> =
+        Algorithm::ALL.iter().enumerate().map(|(i, a)| (i as u64, a.name().to_string())).collect();
+    assert_eq!(decoded, from_all);
+    same_rows("algorithms", t, rows(&documented), rows(&decoded));
+
+    let (t, documented) = codes(&all, "model");
+    let mut decoded = Vec::new();
+    for m in 0..=256u32 {
+        let wire = WireParams { model: m, set: WireParams::bit("model").expect("model bit"), ..WireParams::default() };
+        if let Ok(p) = Params::try_from(&wire) {
+            decoded.push((u64::from(m), p.model.name().to_string()));
+        }
+    }
+    assert_eq!(decoded.len(), [ModelKind::Paper, ModelKind::Anisotropic, ModelKind::Learned].len());
+    same_rows("models", t, rows(&documented), rows(&decoded));
+
+    let (t, documented) = codes(&all, "stop");
+    let mut decoded = Vec::new();
+    for s in 0..=256u32 {
+        let reply = RendezvousReply { stop: s, ..RendezvousReply::checked(1, 0) };
+        if let Ok(answer) = reply.decode_answer() {
+            let name = serde_json::to_value(answer.stop).expect("stop as JSON");
+            decoded.push((u64::from(s), name.as_str().expect("a name").to_string()));
+        }
+    }
+    let _every_stop_is_known = |s: StopReason| match s {
+        StopReason::Finished
+        | StopReason::MaxGenerations
+        | StopReason::Budget
+        | StopReason::Deadline
+        | StopReason::Abandoned => (),
+    };
+    same_rows("stop reasons", t, rows(&documented), rows(&decoded));
+}
+
+/// The wire value of parameter `name` in `w`: exhaustive over [`WireParams::FIELDS`]
+/// (a new parameter panics here until the test and the document know it).
+fn param_values(w: &WireParams, name: &str) -> Vec<f64> {
+    match name {
+        "rover_radius" => vec![w.rover_radius],
+        "marker_size" => vec![w.marker_size],
+        "marker_height" => vec![w.marker_height],
+        "viewer_radius" => vec![w.viewer_radius],
+        "safety_margin" => vec![w.safety_margin],
+        "z_min" => vec![w.z_min],
+        "z_max" => vec![w.z_max],
+        "camera_pitch" => vec![w.camera_pitch],
+        "t_vs" => w.t_vs.to_vec(),
+        "f_h" => vec![w.f_h],
+        "f_v" => vec![w.f_v],
+        "rho_min" => vec![w.rho_min],
+        "rho_max" => vec![w.rho_max],
+        "kappa" => vec![w.kappa],
+        "lambda" => vec![w.lambda],
+        "perimeter_points" => vec![f64::from(w.perimeter_points)],
+        "model" => vec![f64::from(w.model)],
+        other => panic!("parameter `{other}` is new: add it to this test and to docs/wire.md"),
+    }
+}
+
+#[test]
+fn documented_parameter_bits_and_defaults_are_the_rust_ones() {
+    let all = tables(DOC);
+    let t = table(&all, "bit");
+    assert_eq!(&t.header[..4], ["bit", "mask", "parameter", "default"]);
+    let defaults = WireParams::from(&Params::default());
+    // Exact numbers: Rust's shortest round-trip form, so the text is the f64 bit for bit.
+    let show = |v: &[f64]| {
+        let parts: Vec<String> = v.iter().map(|x| format!("{x:?}")).collect();
+        if parts.len() == 1 { parts[0].clone() } else { format!("[{}]", parts.join(", ")) }
+    };
+    let documented: Vec<String> = t
+        .rows
+        .iter()
+        .map(|r| {
+            let numbers: Vec<f64> = code(&r[3])
+                .trim_matches(['[', ']'])
+                .split(',')
+                .map(|x| {
+                    x.trim().parse().unwrap_or_else(|_| panic!("docs/wire.md line {}: default `{}`", t.line, r[3]))
+                })
+                .collect();
+            format!("| {} | {:#x} | `{}` | `{}` |", int(&r[0]), int(&r[1]), code(&r[2]), show(&numbers))
+        })
+        .collect();
+    let expected: Vec<String> = WireParams::FIELDS
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let mask = WireParams::bit(name).expect("bit");
+            assert_eq!(mask, 1 << i);
+            format!("| {i} | {mask:#x} | `{name}` | `{}` |", show(&param_values(&defaults, name)))
+        })
+        .collect();
+    same_rows("parameter bits and defaults", t, documented, expected);
+    // The SPEC defaults are what a request with no bit set gets.
+    assert_eq!(Params::try_from(&WireParams::default()).expect("all defaults"), Params::default());
+}
+
+#[test]
+fn documented_constants_are_the_rust_ones() {
+    let all = tables(DOC);
+    let t = table(&all, "constant");
+    let config = DaemonConfig::default();
+    let expected: Vec<(&str, String)> = vec![
+        ("ANY_VERSION", ANY_VERSION.to_string()),
+        ("DEFAULT_PREFIX", DEFAULT_PREFIX.to_string()),
+        ("MAX_PREFIX_LEN", MAX_PREFIX_LEN.to_string()),
+        ("DETAIL_LEN", DETAIL_LEN.to_string()),
+        ("STATUS_SLOTS", STATUS_SLOTS.to_string()),
+        ("WireParams::ALL_SET", WireParams::ALL_SET.to_string()),
+        ("MAX_INLINE_DELTAS", MAX_INLINE_DELTAS.to_string()),
+        ("MAX_DELTAS_PER_MESSAGE", MAX_DELTAS_PER_MESSAGE.to_string()),
+        ("MAX_UPLOAD_CHUNKS", MAX_UPLOAD_CHUNKS.to_string()),
+        ("MAX_PENDING_UPLOADS", MAX_PENDING_UPLOADS.to_string()),
+        ("MAX_MAPS", MAX_MAPS.to_string()),
+        ("MAX_OBSTACLES", MAX_OBSTACLES.to_string()),
+        ("MAX_OCCUPIED_VOXELS", MAX_OCCUPIED_VOXELS.to_string()),
+        ("MAX_PERIMETER_POINTS", MAX_PERIMETER_POINTS.to_string()),
+        ("MAX_DEADLINE_MICROS", MAX_DEADLINE_MICROS.to_string()),
+        ("max_clients", config.max_clients.to_string()),
+        ("max_requests_per_client", config.max_requests_per_client.to_string()),
+        ("max_queued", config.max_queued.to_string()),
+        ("upload_idle_timeout_s", config.upload_idle_timeout.as_secs().to_string()),
+        ("housekeeping_s", HOUSEKEEPING.as_secs().to_string()),
+        ("client_check_ms", CLIENT_CHECK.as_millis().to_string()),
+    ];
+    let documented: Vec<String> = t
+        .rows
+        .iter()
+        .map(|r| {
+            let value = code(&r[1]).replace('_', "");
+            let value = match value.strip_prefix("0x") {
+                Some(hex) => u64::from_str_radix(hex, 16).map_or(value.clone(), |v| v.to_string()),
+                None => value.clone(),
+            };
+            format!("| `{}` | `{value}` |", code(&r[0]))
+        })
+        .collect();
+    let expected = expected.iter().map(|(n, v)| format!("| `{n}` | `{}` |", v.replace('_', ""))).collect();
+    same_rows("constants", t, documented, expected);
+}
+
+// ----- the running daemon's services -------------------------------------------
+
+/// How a documented payload or header cell reads in iceoryx2's type details.
+fn type_cell(detail: &TypeDetail) -> String {
+    match detail.variant() {
+        TypeVariant::Dynamic => format!("`[{}]`", detail.type_name()),
+        TypeVariant::FixedSize => format!("`{}`", detail.type_name()),
+    }
+}
+
+#[test]
+fn documented_services_and_limits_are_what_dyfosd_creates() {
+    use iceoryx2::prelude::*;
+    use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
+
+    let all = tables(DOC);
+    let sandbox = Sandbox::new("wire-doc");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut config = iceoryx2::config::Config::default();
+    config.global.prefix = FileName::new(sandbox.domain.as_bytes()).expect("domain");
+    let mut services = BTreeMap::new();
+    ipc::Service::list(&config, |s| {
+        services.insert(s.static_details.name().to_string(), s.static_details);
+        CallbackProgression::Continue
+    })
+    .expect("list the domain's services");
+
+    let sizes: BTreeMap<String, (u64, u64)> =
+        table(&all, "type name").rows.iter().map(|r| (code(&r[0]).to_string(), (int(&r[1]), int(&r[2])))).collect();
+    let t = table(&all, "service");
+    assert_eq!(
+        &t.header,
+        &["service", "pattern", "request payload", "request header", "response payload", "response header"]
+    );
+    let names = ServiceNames::new(&sandbox.prefix).expect("prefix");
+    let documented: Vec<String> = t
+        .rows
+        .iter()
+        .map(|r| r.iter().map(|c| c.replace("<prefix>", &sandbox.prefix)).collect::<Vec<_>>().join(" | "))
+        .collect();
+    let mut expected = Vec::new();
+    let mut rr_settings = Vec::new();
+    let mut event_settings = Vec::new();
+    for name in [&names.rendezvous, &names.map, &names.stats, &names.wake, &names.reply] {
+        let s = services.remove(name.as_str()).unwrap_or_else(|| panic!("dyfosd did not create `{name}`"));
+        let row = match s.messaging_pattern() {
+            MessagingPattern::RequestResponse(rr) => {
+                let (req, resp) = (rr.request_message_type_details(), rr.response_message_type_details());
+                for d in [&req.user_header, &req.payload, &resp.user_header, &resp.payload] {
+                    let n = d.type_name().to_string();
+                    let want = sizes.get(&n).copied().unwrap_or((0, 1));
+                    assert_eq!((d.size() as u64, d.alignment() as u64), want, "size and alignment of `{n}`");
+                }
+                rr_settings.push(vec![
+                    format!("max_servers {}", rr.max_servers()),
+                    format!("max_clients {}", rr.max_clients()),
+                    format!("max_nodes {}", rr.max_nodes()),
+                    format!("max_active_requests_per_client {}", rr.max_active_requests_per_client()),
+                    format!("max_response_buffer_size {}", rr.max_response_buffer_size()),
+                    format!("max_loaned_requests {}", rr.max_loaned_requests()),
+                    format!(
+                        "max_borrowed_responses_per_pending_response {}",
+                        rr.max_borrowed_responses_per_pending_response()
+                    ),
+                    format!("fire_and_forget_requests {}", rr.does_support_fire_and_forget_requests()),
+                ]);
+                [
+                    format!("`{name}`"),
+                    "request-response".to_string(),
+                    type_cell(&req.payload),
+                    type_cell(&req.user_header),
+                    type_cell(&resp.payload),
+                    type_cell(&resp.user_header),
+                ]
+            }
+            MessagingPattern::Event(e) => {
+                event_settings.push(vec![
+                    format!("max_nodes {}", e.max_nodes()),
+                    format!("max_notifiers {}", e.max_notifiers()),
+                    format!("max_listeners {}", e.max_listeners()),
+                ]);
+                let none = "—".to_string();
+                [format!("`{name}`"), "event".to_string(), none.clone(), none.clone(), none.clone(), none]
+            }
+            other => panic!("`{name}` is a {other:?} service"),
+        };
+        assert!(
+            DOC.contains(&format!("iceoryx2 {}", s.iceoryx2_version())),
+            "docs/wire.md must name the iceoryx2 version dyfosd uses, {}",
+            s.iceoryx2_version()
+        );
+        expected.push(row.join(" | "));
+    }
+    assert!(services.is_empty(), "dyfosd creates services docs/wire.md does not list: {:?}", services.keys());
+    same_rows("services", t, documented, expected);
+
+    for (first, settings) in [("request-response setting", rr_settings), ("event setting", event_settings)] {
+        let t = table(&all, first);
+        let documented: Vec<String> = t
+            .rows
+            .iter()
+            .map(|r| format!("{} {}", code(&r[0]), code(&r[1]).split_whitespace().next().unwrap_or("")))
+            .collect();
+        for s in settings {
+            same_rows(first, t, documented.clone(), s);
+        }
+    }
+}
