@@ -293,7 +293,11 @@ fn wire_types() -> Vec<WireType> {
             latency_micros,
             latency_samples,
             errors_by_code,
-            queries_abandoned
+            queries_abandoned,
+            receive_failures,
+            log_warnings,
+            ipc_warnings,
+            log_suppressed
         }),
         wire_type!(Detail { len, bytes }),
     ]
