@@ -21,6 +21,7 @@
 
 mod delta;
 mod obstacle;
+pub mod octomap;
 mod segment;
 mod voxels;
 
