@@ -173,3 +173,59 @@ fn numbers_solve_prints_are_taken_back_by_eval() {
         assert!(stderr.contains("no dyfosd"), "{args:?}: {stderr}");
     }
 }
+
+/// SPEC §11 `octomap`: a scenario naming a `.bt` file (relative to the scenario)
+/// gives the same answers, bit for bit, as the same scenario with the OctoMap's
+/// occupied cells listed as `voxels` (OctoMap's real building map geb079).
+#[test]
+fn an_octomap_scenario_answers_as_its_cells_listed_as_voxels() {
+    use dyfos_shared::world::octomap::Octomap;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/octomap");
+    let octomap_scenario = dir.join("geb079-scenario.json");
+    let map = Octomap::from_bt(&std::fs::read(dir.join("geb079.bt")).unwrap()).unwrap();
+    let cells: Vec<[i64; 3]> = map.occupied().iter().flat_map(|c| c.cells().collect::<Vec<_>>()).collect();
+    let mut listed: Value = serde_json::from_str(&std::fs::read_to_string(&octomap_scenario).unwrap()).unwrap();
+    let origin = listed["octomap"]["origin"].clone();
+    listed.as_object_mut().unwrap().remove("octomap");
+    listed["voxels"] = serde_json::json!({"resolution": map.resolution(), "origin": origin, "occupied": cells});
+    let voxel_scenario = scenario_file("geb079-voxels.json", &listed.to_string());
+    let (a, b) = (octomap_scenario.to_str().unwrap(), voxel_scenario.to_str().unwrap());
+    let without_micros = |out: &Output| {
+        let mut v: Value = serde_json::from_slice(&out.stdout).unwrap_or(Value::Null);
+        if let Some(o) = v.as_object_mut() {
+            o.remove("micros");
+        }
+        (out.status.code(), v)
+    };
+    let runs: [&[&str]; 4] = [
+        &["solve", "--seed", "1"],
+        &["solve", "--algo", "random", "--seed", "2"],
+        &["eval", "--x", "2.0", "0.0", "0.0", "3.0"],
+        &["eval", "--x", "3.0", "0.1", "-0.1", "0.0"],
+    ];
+    let mut feasible = 0;
+    for args in runs {
+        let run = |scenario: &str| {
+            let mut full = vec![args[0], scenario];
+            full.extend(&args[1..]);
+            dyfos(&full)
+        };
+        let (octo, vox) = (run(a), run(b));
+        assert_eq!(octo.status.code(), Some(0), "{args:?}: {}", String::from_utf8_lossy(&octo.stderr));
+        assert_eq!(without_micros(&octo), without_micros(&vox), "{args:?}");
+        feasible += usize::from(without_micros(&octo).1["cost"].is_f64());
+    }
+    assert!(feasible > 0, "every run was infeasible: the comparison says little");
+    // Both forms at once, and a file that is not there, are errors naming the field.
+    let both = listed.as_object().unwrap().clone();
+    let mut both = Value::Object(both);
+    both["octomap"] = serde_json::json!({"file": "geb079.bt"});
+    let out = dyfos(&["solve", scenario_file("both.json", &both.to_string()).to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not both"), "{}", String::from_utf8_lossy(&out.stderr));
+    let mut missing: Value = serde_json::from_str(&std::fs::read_to_string(&octomap_scenario).unwrap()).unwrap();
+    missing["octomap"]["file"] = "nowhere.bt".into();
+    let out = dyfos(&["solve", scenario_file("missing.json", &missing.to_string()).to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("octomap.file"), "{}", String::from_utf8_lossy(&out.stderr));
+}

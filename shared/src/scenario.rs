@@ -129,6 +129,16 @@ struct RawScenario {
     params: Option<Object<RawParams>>,
     #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
     voxels: Option<Object<RawVoxels>>,
+    #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
+    octomap: Option<Object<RawOctomap>>,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawOctomap {
+    file: String,
+    #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
+    origin: Option<[f64; 3]>,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -344,12 +354,46 @@ pub fn params_from_json(json: &str) -> Result<Params, ScenarioError> {
 
 impl Scenario {
     /// Parses and validates a scenario document: exactly one JSON object, white
-    /// space around it allowed, nothing else after it.
+    /// space around it allowed, nothing else after it. A scenario with an `octomap`
+    /// names a file, which this cannot read: use [`Scenario::from_json_with_files`].
     pub fn from_json(json: &str) -> Result<Self, ScenarioError> {
-        Self::from_raw(parse_object(json, "")?)
+        Self::from_json_with_files(json, |path| {
+            Err(format!(
+                "cannot read `{path}`: this scenario was not read from a file; load it with its path (dyfos does)"
+            ))
+        })
     }
 
-    fn from_raw(raw: RawScenario) -> Result<Self, ScenarioError> {
+    /// As [`Scenario::from_json`], with `read_file` giving the bytes of the files the
+    /// scenario names (its `octomap.file`, as written; the caller resolves a relative
+    /// path against the scenario's folder, SPEC §11).
+    ///
+    /// *Interpretation (SPEC §1, §11):* the OctoMap's occupied cells become the
+    /// world's voxel grid, of the file's resolution, with `octomap.origin` (default
+    /// 0, 0, 0) as the minimum corner of cell (0, 0, 0); at most
+    /// [`crate::limits::MAX_OCCUPIED_VOXELS`] cells, else an error naming the count.
+    pub fn from_json_with_files(
+        json: &str,
+        read_file: impl FnOnce(&str) -> Result<Vec<u8>, String>,
+    ) -> Result<Self, ScenarioError> {
+        let raw: RawScenario = parse_object(json, "")?;
+        let octomap = match &raw.octomap {
+            None => None,
+            Some(_) if raw.voxels.is_some() => {
+                return Err(ScenarioError::invalid("octomap", "a scenario carries `voxels` or `octomap`, not both"));
+            }
+            Some(o) => {
+                let bytes = read_file(&o.file).map_err(|e| ScenarioError::invalid("octomap.file", e))?;
+                let map = crate::world::octomap::Octomap::from_bt(&bytes)
+                    .map_err(|e| ScenarioError::invalid("octomap.file", format!("{}: {e}", o.file)))?;
+                let origin = o.origin.unwrap_or([0.0; 3]);
+                Some(map.to_voxels(Point3::from(origin)).map_err(|e| ScenarioError::invalid("octomap", e))?)
+            }
+        };
+        Self::from_raw(raw, octomap)
+    }
+
+    fn from_raw(raw: RawScenario, octomap: Option<VoxelGrid>) -> Result<Self, ScenarioError> {
         let bounds = Bounds::new(raw.bounds).map_err(|e| ScenarioError::invalid("bounds", e.problem))?;
         let sun = crate::world::Sun::new(raw.sun.elevation, raw.sun.azimuth)
             .map_err(|e| ScenarioError::invalid(format!("sun.{}", e.field), format!("= {} {}", e.value, e.rule)))?;
@@ -391,7 +435,7 @@ impl Scenario {
             obstacles.push((o.id, obstacle));
         }
         let voxels = match &raw.voxels {
-            None => None,
+            None => octomap,
             Some(v) => Some(
                 VoxelGrid::new(v.resolution, Point3::from(v.origin), v.occupied.iter().copied())
                     .map_err(|e| ScenarioError::invalid("voxels", e))?,
@@ -451,6 +495,7 @@ impl Scenario {
                     occupied: v.occupied().copied().collect(),
                 })
             }),
+            octomap: None,
         };
         serde_json::to_string_pretty(&raw).expect("scenario serializes")
     }

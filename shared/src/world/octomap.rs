@@ -30,7 +30,7 @@
 //! assert!(Octomap::from_bt(&file[..file.len() - 1]).unwrap_err().to_string().contains("truncated"));
 //! ```
 
-use crate::world::CellIndex;
+use crate::world::{CellIndex, VoxelError};
 
 /// The depth of OctoMap's trees: 16 levels, keys of 16 bits.
 pub const TREE_DEPTH: u32 = 16;
@@ -133,6 +133,17 @@ impl Octomap {
     /// How many finest cells are occupied.
     pub fn cell_count(&self) -> u64 {
         self.occupied.iter().map(OccupiedCube::cell_count).sum()
+    }
+
+    /// The occupied cells as a voxel grid whose cell (0, 0, 0) has its minimum corner
+    /// at `origin` (SPEC §1). Refused, before any cell is listed, if there are more
+    /// than [`crate::limits::MAX_OCCUPIED_VOXELS`].
+    pub fn to_voxels(&self, origin: crate::math::Point3<f64>) -> Result<crate::world::VoxelGrid, VoxelError> {
+        let count = self.cell_count();
+        if count > crate::limits::MAX_OCCUPIED_VOXELS as u64 {
+            return Err(VoxelError::TooManyCells { count: usize::try_from(count).unwrap_or(usize::MAX) });
+        }
+        crate::world::VoxelGrid::new(self.resolution, origin, self.occupied.iter().flat_map(OccupiedCube::cells))
     }
 }
 

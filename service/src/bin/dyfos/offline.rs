@@ -57,7 +57,11 @@ pub fn load_scenario(path: &Path) -> Result<Scenario, Failure> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read scenario file {}", path.display()))
         .map_err(Failure::invalid)?;
-    Scenario::from_json(&text).map_err(|e| Failure::invalid(anyhow::anyhow!("{}: {e}", path.display())))
+    // An `octomap.file` is relative to the scenario's folder (SPEC §11).
+    let folder = path.parent().unwrap_or(Path::new("."));
+    let read = |file: &str| std::fs::read(folder.join(file)).map_err(|e| format!("cannot read `{file}`: {e}"));
+    Scenario::from_json_with_files(&text, read)
+        .map_err(|e| Failure::invalid(anyhow::anyhow!("{}: {e}", path.display())))
 }
 
 /// The scenario's SDSMM; a `--model` file selects `learned` with its weights. A
