@@ -264,6 +264,32 @@ mod tests {
         assert!(limit.admit(1, Level::WARN, || "flood".into(), t0 + WINDOW));
     }
 
+    /// iceoryx2's own lines (its warning for each notification towards a dead
+    /// client's listener) are counted and held back like ours.
+    #[test]
+    fn iceoryx2_warnings_are_counted_and_held_back() {
+        use std::sync::atomic::AtomicUsize;
+        struct Written(std::sync::Arc<AtomicUsize>);
+        impl<S: Subscriber> Layer<S> for Written {
+            fn on_event(&self, _: &Event<'_>, _: Context<'_, S>) {
+                self.0.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        let written = std::sync::Arc::new(AtomicUsize::new(0));
+        let subscriber =
+            tracing_subscriber::registry().with(RateLimit::default()).with(Written(std::sync::Arc::clone(&written)));
+        let before = counters();
+        tracing::subscriber::with_default(subscriber, || {
+            for id in 0..200u64 {
+                tracing::warn!(target: "iceoryx2_bb_loggers::tracing", origin = "Notifier { .. }", "Inconsistency detected! No connection but listener id: {id}.");
+            }
+        });
+        let after = counters();
+        assert_eq!(written.load(Ordering::Relaxed), BURST as usize);
+        assert_eq!(after.ipc_warnings - before.ipc_warnings, 200);
+        assert!(after.suppressed - before.suppressed >= 200 - u64::from(BURST));
+    }
+
     #[test]
     fn long_fields_are_cut_at_a_character_boundary() {
         let mut text = "é".repeat(FIELD_LIMIT);

@@ -633,8 +633,10 @@ fn a_misbehaving_client_cannot_flood_the_daemons_log() {
     let s = scenario("example.json");
     client.upload_map(1, &s.world, false, PATIENCE).unwrap();
     let good = WellFormed::start(&sandbox, 1, s.clone());
-    // Both patterns go on for at least 3 s and until the daemon has seen each at
-    // least once (at most 30 s).
+    // Both patterns go on for at least 3 s and until the daemon has seen the first
+    // (at most 30 s). The second makes iceoryx2 warn only when the dead listener's
+    // slot comes before the live one's, which this test cannot choose; the limit on
+    // iceoryx2's lines is shown by `dyfos_client::logging`'s unit test.
     let done = AtomicBool::new(false);
     let brute =
         RendezvousRequest { algorithm: Algorithm::Brute, params: s.params, ..RendezvousRequest::new(1, s.belief) };
@@ -692,9 +694,10 @@ fn a_misbehaving_client_cannot_flood_the_daemons_log() {
             for b in busy {
                 b.join().unwrap().unwrap();
             }
-            std::thread::sleep(std::time::Duration::from_millis(500));
+            // The dead client's query is answered meanwhile (its reply goes nowhere).
+            std::thread::sleep(std::time::Duration::from_millis(300));
             let stats = watcher.stats(PATIENCE).unwrap();
-            let seen = stats.receive_failures > 0 && stats.ipc_warnings > 0;
+            let seen = stats.receive_failures > 0;
             if (seen && start.elapsed().as_secs() >= 3) || start.elapsed().as_secs() >= 30 {
                 break;
             }
@@ -708,7 +711,6 @@ fn a_misbehaving_client_cannot_flood_the_daemons_log() {
     assert!(killed >= 2, "only {killed} clients were killed");
     assert!(stats.receive_failures > 0, "the flood never exceeded the daemon's borrows: {stats:?}");
     assert!(stats.log_warnings >= stats.receive_failures, "{stats:?}");
-    assert!(stats.ipc_warnings > 0, "no iceoryx2 warning about a dead client's listener: {stats:?}");
     assert!(stats.log_suppressed > 0, "{stats:?}");
     assert!(log.len() < 48 * 1024, "the daemon wrote {} bytes of log:\n{}", log.len(), &log[..log.len().min(20_000)]);
     assert!(daemon.terminate().success(), "{log}");
