@@ -181,7 +181,7 @@ fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String
             if name == "kill" {
                 let snapshot_map = sections.iter().find_map(|(n, _)| n.strip_prefix("snapshot ").map(str::to_string));
                 if let Some(map) = snapshot_map {
-                    let out = run(sandbox.dyfos("map").args(["snapshot", &map]));
+                    let out = run(Command::new(bin("dyfos")).args(["map", "snapshot", &map]).args(sandbox.dyfos_flags()));
                     cli_snapshot = Some(String::from_utf8(out.stdout).expect("UTF-8"));
                 }
                 daemon.kill9();
