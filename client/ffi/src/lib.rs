@@ -458,8 +458,8 @@ pub unsafe extern "C" fn dyfos_params_from_json(json: *const c_char, params: *mu
     boundary(|| {
         non_null(params, "params")?;
         // SAFETY: NULL or NUL-terminated, as the caller promises.
-        let parsed = params_from_json(unsafe { text(json, "json")? })
-            .map_err(|e| Failure::invalid(format!("params: {e}")))?;
+        let parsed =
+            params_from_json(unsafe { text(json, "json")? }).map_err(|e| Failure::invalid(format!("params: {e}")))?;
         // SAFETY: non-null and writable, as the caller promises.
         unsafe { write(params, "params", dyfos_params::from_params(&parsed, DYFOS_PARAMS_ALL_SET)) }
     })

@@ -539,10 +539,17 @@ mod tests {
         // SAFETY: no deltas pointer.
         let err = unsafe { r.to_request() }.unwrap_err();
         assert_eq!(err.code, DYFOS_STATUS_INVALID_BELIEF);
-        let good = dyfos_rendezvous_request { mean: [0.0, 0.0, 0.3], cov: [[0.2, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.05]], ..r };
+        let good = dyfos_rendezvous_request {
+            mean: [0.0, 0.0, 0.3],
+            cov: [[0.2, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.05]],
+            ..r
+        };
         // SAFETY: no deltas pointer.
         let request = unsafe { good.to_request() }.unwrap();
-        assert_eq!((request.params, request.algorithm, request.expected_version), (Params::default(), Algorithm::Dyfos, None));
+        assert_eq!(
+            (request.params, request.algorithm, request.expected_version),
+            (Params::default(), Algorithm::Dyfos, None)
+        );
         let bad_algorithm = dyfos_rendezvous_request { algorithm: 5, ..good };
         // SAFETY: no deltas pointer.
         assert_eq!(unsafe { bad_algorithm.to_request() }.unwrap_err().code, DYFOS_STATUS_INVALID_ALGORITHM);

@@ -68,10 +68,8 @@ fn install(prefix: &Path) {
 
 /// `pkg-config ARGS dyfos` for the installation under `prefix`, split into flags.
 fn pkg_config(prefix: &Path, args: &[&str]) -> Vec<String> {
-    let out = run(Command::new("pkg-config")
-        .args(args)
-        .arg("dyfos")
-        .env("PKG_CONFIG_PATH", prefix.join("lib/pkgconfig")));
+    let out =
+        run(Command::new("pkg-config").args(args).arg("dyfos").env("PKG_CONFIG_PATH", prefix.join("lib/pkgconfig")));
     String::from_utf8(out.stdout).expect("UTF-8 flags").split_whitespace().map(str::to_string).collect()
 }
 
@@ -136,11 +134,8 @@ fn the_c_and_cpp_examples_print_what_dyfos_solve_prints() {
     let scenario = data("example.json");
     let expected = without_micros_line(&dyfos_solve(&scenario, "dyfos", "7"));
     for program in ["query_c", "query_c_static", "query_cpp"] {
-        let out = run(Command::new(scratch.0.join(program)).arg(&scenario).args([
-            &sandbox.prefix,
-            &sandbox.domain,
-            "7",
-        ]));
+        let out =
+            run(Command::new(scratch.0.join(program)).arg(&scenario).args([&sandbox.prefix, &sandbox.domain, "7"]));
         let got = String::from_utf8(out.stdout).expect("UTF-8");
         assert_eq!(without_micros_line(&got), expected, "{program}");
     }
@@ -181,7 +176,8 @@ fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String
             if name == "kill" {
                 let snapshot_map = sections.iter().find_map(|(n, _)| n.strip_prefix("snapshot ").map(str::to_string));
                 if let Some(map) = snapshot_map {
-                    let out = run(Command::new(bin("dyfos")).args(["map", "snapshot", &map]).args(sandbox.dyfos_flags()));
+                    let out =
+                        run(Command::new(bin("dyfos")).args(["map", "snapshot", &map]).args(sandbox.dyfos_flags()));
                     cli_snapshot = Some(String::from_utf8(out.stdout).expect("UTF-8"));
                 }
                 daemon.kill9();

@@ -11,11 +11,11 @@
 //! ```
 #![allow(unsafe_code)] // Calls the C ABI, as a C program would.
 
+use ::dyfos_client::prelude::*;
 use dyfos::{
     DYFOS_STATUS_OK, dyfos_client, dyfos_client_check, dyfos_client_connect, dyfos_client_free,
     dyfos_rendezvous_request, dyfos_rendezvous_request_init,
 };
-use ::dyfos_client::prelude::*;
 use std::ffi::CString;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
@@ -39,7 +39,11 @@ fn args() -> Result<Args, String> {
             "--dyfosd" => args.dyfosd = PathBuf::from(value()?),
             "--calls" => args.calls = value()?.parse().map_err(|e| format!("--calls: {e}"))?,
             "--round" => args.round = value()?.parse().map_err(|e| format!("--round: {e}"))?,
-            _ => return Err(format!("unknown flag {flag}; usage: dyfos-ffi-bench [--dyfosd PATH] [--calls N] [--round N]")),
+            _ => {
+                return Err(format!(
+                    "unknown flag {flag}; usage: dyfos-ffi-bench [--dyfosd PATH] [--calls N] [--round N]"
+                ));
+            }
         }
     }
     if args.round == 0 || args.calls < args.round {
@@ -151,7 +155,12 @@ fn run() -> Result<(), String> {
     unsafe { dyfos_client_free(handle) };
     through_rust.sort_unstable();
     through_c.sort_unstable();
-    println!("check-mode round trips, {} each, alternating rounds of {} ({:.1} s)", through_rust.len(), a.round, wall.as_secs_f64());
+    println!(
+        "check-mode round trips, {} each, alternating rounds of {} ({:.1} s)",
+        through_rust.len(),
+        a.round,
+        wall.as_secs_f64()
+    );
     println!("| path | p10 µs | p50 µs | p90 µs | p99 µs |");
     println!("|---|---|---|---|---|");
     for (name, s) in [("Rust client (`Client::check`)", &through_rust), ("C ABI (`dyfos_client_check`)", &through_c)] {
