@@ -515,11 +515,11 @@ pub unsafe extern "C" fn dyfos_last_error(buf: *mut c_char, len: usize) -> usize
 /// `"null_parameter"`, ...), or `"unknown_status"`. A static string: do not free it.
 #[unsafe(no_mangle)]
 pub extern "C" fn dyfos_status_name(status: dyfos_status) -> *const c_char {
-    let name: &'static std::ffi::CStr = match status_name(status) {
-        Some(n) => STATUS_C_NAMES.iter().find(|c| c.to_bytes() == n.as_bytes()).copied().unwrap_or(c"unknown_status"),
-        None => c"unknown_status",
-    };
-    name.as_ptr()
+    let name = std::panic::catch_unwind(|| match status_name(status) {
+        Some(n) => STATUS_C_NAMES.iter().find(|c| c.to_bytes() == n.as_bytes()).copied(),
+        None => None,
+    });
+    name.ok().flatten().unwrap_or(c"unknown_status").as_ptr()
 }
 
 /// Every status name as a C string (`dyfos_status_name` hands these out).

@@ -68,6 +68,10 @@ fn install(prefix: &Path) {
 
 /// `pkg-config ARGS dyfos` for the installation under `prefix`, split into flags.
 fn pkg_config(prefix: &Path, args: &[&str]) -> Vec<String> {
+    assert!(
+        Command::new("pkg-config").arg("--version").output().is_ok(),
+        "pkg-config is not installed: run client/ffi/test.sh --deps (or apt-get install -y pkg-config)"
+    );
     let out =
         run(Command::new("pkg-config").args(args).arg("dyfos").env("PKG_CONFIG_PATH", prefix.join("lib/pkgconfig")));
     String::from_utf8(out.stdout).expect("UTF-8 flags").split_whitespace().map(str::to_string).collect()

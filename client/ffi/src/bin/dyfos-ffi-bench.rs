@@ -98,6 +98,29 @@ fn run() -> Result<(), String> {
     let cov = [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]];
     let request = RendezvousRequest::new(1, Belief::new(mean, cov).map_err(|e| e.to_string())?);
 
+    // What the C path validates per request before it reaches the Rust client
+    // (the Rust client is handed a request already validated).
+    {
+        use dyfos_shared::wire::rendezvous::WireParams;
+        let n = 200_000;
+        let t = Instant::now();
+        for _ in 0..n {
+            std::hint::black_box(Belief::new(std::hint::black_box(mean), std::hint::black_box(cov)).is_ok());
+        }
+        println!("C-side validation per request: Belief::new {:.0} ns", t.elapsed().as_nanos() as f64 / n as f64);
+        let w0 = WireParams::default();
+        let t = Instant::now();
+        for _ in 0..n {
+            std::hint::black_box(Params::try_from(std::hint::black_box(&w0)).is_ok());
+        }
+        println!("  Params::try_from, no field set: {:.0} ns", t.elapsed().as_nanos() as f64 / n as f64);
+        let w1 = WireParams::from(&Params::default());
+        let t = Instant::now();
+        for _ in 0..n {
+            std::hint::black_box(Params::try_from(std::hint::black_box(&w1)).is_ok());
+        }
+        println!("  Params::try_from, every field set: {:.0} ns", t.elapsed().as_nanos() as f64 / n as f64);
+    }
     let (c_prefix, c_domain) = (CString::new(prefix).unwrap_or_default(), CString::new(domain).unwrap_or_default());
     let mut handle: *mut dyfos_client = std::ptr::null_mut();
     // SAFETY: valid C strings and a local output.

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iostream>
 #include <sstream>
+#include <thread>
 #include <type_traits>
 
 static int failures = 0;
@@ -80,6 +81,18 @@ int main(int argc, char** argv) {
   request.seed = 2;
   std::cout << "--- answer random 2\n" << client.rendezvous(request).to_json() << "\n";
   EXPECT_TRUE(client.check(request) == version);
+
+  // One client shared by threads: their calls are serialised, each gets its reply.
+  {
+    int ok[2] = {0, 0};
+    auto work = [&](int i) {
+      for (int k = 0; k < 50; ++k) ok[i] += client.check(request) == version;
+    };
+    std::thread other(work, 1);
+    work(0);
+    other.join();
+    EXPECT_TRUE(ok[0] == 50 && ok[1] == 50);
+  }
 
   // Parameters: left out, given as their defaults, or one set by the builder.
   dyfos::RendezvousRequest defaulted;
