@@ -376,7 +376,7 @@ pub unsafe extern "C" fn dyfos_client_rendezvous(
     boundary(|| {
         non_null(answer_out, "answer_out")?;
         // SAFETY: NULL or a valid request with a valid `deltas_json`, as the caller promises.
-        let request = unsafe { required(request, "request")?.to_request()? };
+        let request = unsafe { required(request, "request")?.decode()? };
         let answer = with_client(client, |c, timeout| Ok(c.rendezvous(&request, timeout)?))?;
         // SAFETY: non-null and writable, as the caller promises.
         unsafe { write(answer_out, "answer_out", dyfos_answer::from(&answer)) }
@@ -399,7 +399,7 @@ pub unsafe extern "C" fn dyfos_client_check(
     boundary(|| {
         non_null(map_version_out, "map_version_out")?;
         // SAFETY: NULL or a valid request with a valid `deltas_json`, as the caller promises.
-        let request = unsafe { required(request, "request")?.to_request()? };
+        let request = unsafe { required(request, "request")?.decode()? };
         let checked = with_client(client, |c, timeout| Ok(c.check(&request, timeout)?))?;
         // SAFETY: non-null and writable, as the caller promises.
         unsafe { write(map_version_out, "map_version_out", checked.map_version) }
@@ -419,7 +419,7 @@ pub unsafe extern "C" fn dyfos_answer_to_json(answer: *const dyfos_answer, json_
     boundary(|| {
         non_null(json_out, "json_out")?;
         // SAFETY: NULL or a valid answer, as the caller promises.
-        let answer = unsafe { required(answer, "answer")? }.to_answer()?;
+        let answer = unsafe { required(answer, "answer")? }.decode()?;
         give_string(json_out, "json_out", json_text(&answer.to_json()))
     })
 }

@@ -184,6 +184,10 @@ impl dyfos_params {
 
     /// Decodes and validates (SPEC §11 ranges); unset fields take the default.
     pub(crate) fn to_params(self) -> Result<Params, Failure> {
+        if self.set == 0 {
+            // What `Params::try_from` gives for no field set, without its checks.
+            return Ok(Params::default());
+        }
         Params::try_from(&WireParams::from(&self)).map_err(Failure::from)
     }
 }
@@ -245,7 +249,7 @@ impl dyfos_rendezvous_request {
     ///
     /// # Safety
     /// `self.deltas_json` is NULL or a NUL-terminated string valid for the call.
-    pub(crate) unsafe fn to_request(&self) -> Result<RendezvousRequest, Failure> {
+    pub(crate) unsafe fn decode(&self) -> Result<RendezvousRequest, Failure> {
         let belief = Belief::new(self.mean, self.cov)
             .map_err(|e| Failure::new(DYFOS_STATUS_INVALID_BELIEF, format!("belief: {e}")))?;
         let algorithm = *Algorithm::ALL.get(self.algorithm as usize).ok_or_else(|| {
@@ -370,7 +374,7 @@ impl From<&Answer> for dyfos_answer {
 
 impl dyfos_answer {
     /// Rebuilds the answer (for its JSON); codes written by the caller are checked.
-    pub(crate) fn to_answer(&self) -> Result<Answer, Failure> {
+    pub(crate) fn decode(&self) -> Result<Answer, Failure> {
         let a = self;
         let algorithm = *Algorithm::ALL
             .get(a.algorithm as usize)
@@ -527,17 +531,17 @@ mod tests {
         let c = dyfos_answer::from(&answer);
         assert_eq!(c.algorithm, DYFOS_ALGORITHM_BRUTE);
         assert_eq!(c.stop, DYFOS_STOP_DEADLINE);
-        let back = c.to_answer().unwrap();
+        let back = c.decode().unwrap();
         assert_eq!(back.to_json(), answer.to_json());
-        assert!(dyfos_answer { stop: 5, ..c }.to_answer().is_err());
-        assert!(dyfos_answer { algorithm: 5, ..c }.to_answer().is_err());
+        assert!(dyfos_answer { stop: 5, ..c }.decode().is_err());
+        assert!(dyfos_answer { algorithm: 5, ..c }.decode().is_err());
     }
 
     #[test]
     fn a_default_request_needs_a_belief() {
         let r = dyfos_rendezvous_request::defaults();
         // SAFETY: no deltas pointer.
-        let err = unsafe { r.to_request() }.unwrap_err();
+        let err = unsafe { r.decode() }.unwrap_err();
         assert_eq!(err.code, DYFOS_STATUS_INVALID_BELIEF);
         let good = dyfos_rendezvous_request {
             mean: [0.0, 0.0, 0.3],
@@ -545,13 +549,13 @@ mod tests {
             ..r
         };
         // SAFETY: no deltas pointer.
-        let request = unsafe { good.to_request() }.unwrap();
+        let request = unsafe { good.decode() }.unwrap();
         assert_eq!(
             (request.params, request.algorithm, request.expected_version),
             (Params::default(), Algorithm::Dyfos, None)
         );
         let bad_algorithm = dyfos_rendezvous_request { algorithm: 5, ..good };
         // SAFETY: no deltas pointer.
-        assert_eq!(unsafe { bad_algorithm.to_request() }.unwrap_err().code, DYFOS_STATUS_INVALID_ALGORITHM);
+        assert_eq!(unsafe { bad_algorithm.decode() }.unwrap_err().code, DYFOS_STATUS_INVALID_ALGORITHM);
     }
 }
