@@ -252,3 +252,44 @@ fn the_cpp_wrapper_answers_like_dyfos_solve_and_throws_each_family() {
         assert_eq!(without_micros_line(text), without_micros_line(&dyfos_solve(&scenario, algorithm, seed)), "{name}");
     }
 }
+
+/// The CMake package: `find_package(dyfos)` finds the installed library, and the C++
+/// example (shared) and the C example (static) build and run against a daemon.
+/// Needs cmake, which the CI machine lacks: `client/ffi/test.sh --cmake` installs it
+/// and runs this test.
+#[test]
+#[ignore = "needs cmake: run client/ffi/test.sh --cmake"]
+fn the_cmake_package_finds_the_library() {
+    let scratch = Scratch::new("cmake");
+    let prefix = scratch.0.join("prefix");
+    install(&prefix);
+    let app = scratch.0.join("app");
+    std::fs::create_dir_all(&app).expect("app dir");
+    for file in ["query.c", "query.cpp"] {
+        std::fs::copy(crate_dir().join("examples").join(file), app.join(file)).expect("copy the example");
+    }
+    std::fs::write(
+        app.join("CMakeLists.txt"),
+        "cmake_minimum_required(VERSION 3.16)\nproject(dyfos_query C CXX)\nfind_package(dyfos REQUIRED)\n\
+         add_executable(query_cpp query.cpp)\nset_target_properties(query_cpp PROPERTIES CXX_STANDARD 17)\n\
+         target_link_libraries(query_cpp PRIVATE dyfos::dyfos)\n\
+         add_executable(query_c_static query.c)\ntarget_link_libraries(query_c_static PRIVATE dyfos::dyfos_static)\n",
+    )
+    .expect("CMakeLists.txt");
+    let build = app.join("build");
+    run(Command::new("cmake")
+        .arg("-S")
+        .arg(&app)
+        .arg("-B")
+        .arg(&build)
+        .arg(format!("-DCMAKE_PREFIX_PATH={}", prefix.display())));
+    run(Command::new("cmake").arg("--build").arg(&build));
+    let sandbox = Sandbox::new("ffi-cmake");
+    let _daemon = sandbox.start_daemon(&[]);
+    let scenario = data("example.json");
+    let expected = without_micros_line(&dyfos_solve(&scenario, "dyfos", "3"));
+    for program in ["query_cpp", "query_c_static"] {
+        let out = run(Command::new(build.join(program)).arg(&scenario).args([&sandbox.prefix, &sandbox.domain, "3"]));
+        assert_eq!(without_micros_line(&String::from_utf8(out.stdout).expect("UTF-8")), expected, "{program}");
+    }
+}
