@@ -114,10 +114,16 @@ pub struct ParamError {
 }
 
 fn require(field: &'static str, value: f64, ok: bool, rule: impl Into<String>) -> Result<(), ParamError> {
+    require_with(field, value, ok, || rule.into())
+}
+
+/// [`require`] whose rule is only formatted on failure: `validate` runs for every
+/// request, and formatting two numbers on every call cost more than all the checks.
+fn require_with(field: &'static str, value: f64, ok: bool, rule: impl FnOnce() -> String) -> Result<(), ParamError> {
     if !value.is_finite() {
         return Err(ParamError { field, value, rule: "must be a finite number".into() });
     }
-    if ok { Ok(()) } else { Err(ParamError { field, value, rule: rule.into() }) }
+    if ok { Ok(()) } else { Err(ParamError { field, value, rule: rule() }) }
 }
 
 impl Params {
@@ -137,14 +143,14 @@ impl Params {
         require("f_h", p.f_h, p.f_h > 0.0 && p.f_h < PI, "must be in (0, π)")?;
         require("f_v", p.f_v, p.f_v > 0.0 && p.f_v < PI, "must be in (0, π)")?;
         require("z_min", p.z_min, p.z_min >= 0.0, "must be >= 0")?;
-        require("z_max", p.z_max, p.z_max > p.z_min, format!("must be > z_min = {}", p.z_min))?;
+        require_with("z_max", p.z_max, p.z_max > p.z_min, || format!("must be > z_min = {}", p.z_min))?;
         require("camera_pitch", p.camera_pitch, p.camera_pitch.abs() <= FRAC_PI_2, "must be in [-π/2, π/2]")?;
         for (i, v) in p.t_vs.iter().enumerate() {
             let field = ["t_vs[0]", "t_vs[1]", "t_vs[2]"][i];
             require(field, *v, v.abs() <= MAX_COORDINATE, "must be within ±1e6 m")?;
         }
         require("rho_min", p.rho_min, p.rho_min > 0.0, "must be > 0")?;
-        require("rho_min", p.rho_min, p.rho_min < p.rho_max, format!("must be < rho_max = {}", p.rho_max))?;
+        require_with("rho_min", p.rho_min, p.rho_min < p.rho_max, || format!("must be < rho_max = {}", p.rho_max))?;
         require("rho_max", p.rho_max, p.rho_max <= MAX_COORDINATE, "must be <= 1e6")?;
         require("kappa", p.kappa, p.kappa > 0.0, "must be > 0")?;
         require("lambda", p.lambda, p.lambda >= 0.0, "must be >= 0")?;

@@ -1,0 +1,670 @@
+//! # dyfos-ffi: the C ABI of the dyfos client
+//!
+//! `libdyfos.so` / `libdyfos.a` with the header `include/dyfos.h` (generated from
+//! this crate by cbindgen, checked in, and checked by a test), and the header-only
+//! C++17 wrapper `include/dyfos.hpp` over it. Every function wraps the one Rust
+//! client, [`dyfos_client::Client`]; nothing of the protocol is re-implemented.
+//!
+//! The rules, for every function (see `client/ffi/README.md`):
+//!
+//! - Every fallible function returns a `dyfos_status`: `DYFOS_STATUS_OK` (0), the
+//!   daemon's wire status code (1..=21), or a client-side code (1000..). After a
+//!   failure, `dyfos_last_error` gives this thread's message; a success clears it.
+//! - No panic crosses the boundary: every body runs inside `catch_unwind`, and a
+//!   caught panic is `DYFOS_STATUS_PANIC`.
+//! - A NULL required pointer is `DYFOS_STATUS_NULL_PARAMETER`, never a crash. A
+//!   `dyfos_client *` is a token the library looks up in its table, never memory it
+//!   reads, so a freed (or made-up) handle is refused with the same code instead of
+//!   being undefined behaviour. Other pointers (strings, structs, buffers) must be
+//!   valid for the call when not NULL, as in any C API.
+//! - Input strings are UTF-8, NUL-terminated, borrowed for the call only. Strings
+//!   the library returns (`char **` outputs) belong to the caller, who frees each
+//!   exactly once with `dyfos_string_free`. Structs are plain values the caller owns.
+//! - A handle may be used from several threads: its calls are serialised by a
+//!   mutex (one request at a time per handle). For parallel queries, connect one
+//!   handle per thread.
+#![allow(unsafe_code)] // The C ABI; every unsafe block says why it is sound.
+#![allow(non_camel_case_types)] // C names: dyfos_client, dyfos_answer, ...
+#![warn(missing_docs)]
+
+mod status;
+mod types;
+
+pub use status::*;
+pub use types::*;
+
+use ::dyfos_client::{Client, ClientConfig};
+use dyfos_shared::scenario::{Scenario, params_from_json};
+use dyfos_shared::wire::DEFAULT_PREFIX;
+use dyfos_shared::world::{Bounds, Sun};
+use std::collections::BTreeMap;
+use std::ffi::{CString, c_char};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+/// A connection to one `dyfosd` (opaque). Made by `dyfos_client_connect`, released
+/// by `dyfos_client_free`. The pointer is a token, never dereferenced: a freed
+/// handle is detected and refused with `DYFOS_STATUS_NULL_PARAMETER`.
+pub struct dyfos_client {
+    _opaque: [u8; 0],
+}
+
+/// One live handle: the client (one request at a time) and the timeout of its calls.
+struct Slot {
+    client: Mutex<Client>,
+    timeout: Duration,
+}
+
+/// Every live handle by its token. Tokens are never reused within a process.
+static CLIENTS: Mutex<BTreeMap<usize, Arc<Slot>>> = Mutex::new(BTreeMap::new());
+static NEXT_TOKEN: AtomicUsize = AtomicUsize::new(1);
+
+fn clients() -> std::sync::MutexGuard<'static, BTreeMap<usize, Arc<Slot>>> {
+    // The table holds no invariant a panic could break half-way.
+    CLIENTS.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// The live handle `client`, or the null-parameter failure.
+fn slot(client: *const dyfos_client) -> Result<Arc<Slot>, Failure> {
+    if client.is_null() {
+        return Err(Failure::null("client"));
+    }
+    clients().get(&client.addr()).cloned().ok_or_else(|| {
+        Failure::new(
+            DYFOS_STATUS_NULL_PARAMETER,
+            "`client` is not a live handle: it was freed already, or did not come from dyfos_client_connect",
+        )
+    })
+}
+
+/// Runs `call` with the handle's client (waiting for another thread's call on the
+/// same handle to finish) and its timeout.
+fn with_client<T>(
+    client: *const dyfos_client,
+    call: impl FnOnce(&mut Client, Duration) -> Result<T, Failure>,
+) -> Result<T, Failure> {
+    let slot = slot(client)?;
+    // A panic inside a call leaves the client usable (it is memory-safe Rust; at
+    // worst its connection is dropped and re-opened by the next call).
+    let mut guard = slot.client.lock().unwrap_or_else(PoisonError::into_inner);
+    call(&mut guard, slot.timeout)
+}
+
+/// Reads a required UTF-8 string argument.
+///
+/// # Safety
+/// `ptr` is NULL or a NUL-terminated string valid for `'a`.
+pub(crate) unsafe fn text<'a>(ptr: *const c_char, what: &str) -> Result<&'a str, Failure> {
+    // SAFETY: as the caller promises.
+    let s = unsafe { c_str(ptr) }.ok_or_else(|| Failure::null(what))?;
+    s.to_str().map_err(|e| Failure::invalid(format!("`{what}` is not UTF-8: {e}")))
+}
+
+/// Hands `s` to the caller through `out` (freed with `dyfos_string_free`).
+fn give_string(out: *mut *mut c_char, what: &str, s: String) -> Result<(), Failure> {
+    let c = CString::new(s).map_err(|e| Failure::invalid(format!("{what} holds a NUL byte: {e}")))?;
+    let raw = c.into_raw();
+    // SAFETY: `out` was checked non-null by the caller of this helper (or is checked
+    // here) and points to writable memory for one pointer, as the API documents.
+    if let Err(e) = unsafe { write(out, what, raw) } {
+        // SAFETY: `raw` came from `CString::into_raw` just above and was not handed out.
+        drop(unsafe { CString::from_raw(raw) });
+        return Err(e);
+    }
+    Ok(())
+}
+
+/// A JSON value as `dyfos` prints it (`print_json` of the `dyfos` CLI): an object
+/// with one `"key": value` line per field, two spaces in; anything else on one line.
+pub fn json_text(value: &serde_json::Value) -> String {
+    let Some(object) = value.as_object() else {
+        return value.to_string();
+    };
+    let fields: Vec<String> =
+        object.iter().map(|(k, v)| format!("  {}: {v}", serde_json::Value::from(k.as_str()))).collect();
+    format!("{{\n{}\n}}", fields.join(",\n"))
+}
+
+/// Connects to the `dyfosd` serving `prefix` and writes the new handle to `*out`.
+///
+/// - `prefix`: the daemon's service prefix (its `--prefix`); NULL for `"dyfos/"`.
+/// - `domain`: the iceoryx2 domain (the daemon's `--domain`); NULL for the default.
+/// - `timeout_ms`: how long to wait for the daemon now, and for every reply of the
+///   calls made with this handle; must be > 0.
+/// - `out`: receives the handle (NULL on failure). The caller owns it and releases
+///   it with `dyfos_client_free`.
+///
+/// Returns `DYFOS_STATUS_NO_DAEMON` if no daemon serves the prefix within the timeout.
+///
+/// # Safety
+/// `prefix` and `domain` are NULL or NUL-terminated strings; `out` is NULL or
+/// writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_connect(
+    prefix: *const c_char,
+    domain: *const c_char,
+    timeout_ms: u64,
+    out: *mut *mut dyfos_client,
+) -> dyfos_status {
+    boundary(|| {
+        non_null(out, "out")?;
+        // SAFETY: `out` is non-null and writable, as the caller promises.
+        unsafe { out.write(std::ptr::null_mut()) };
+        // SAFETY: NULL or NUL-terminated, as the caller promises.
+        let prefix = if prefix.is_null() { DEFAULT_PREFIX } else { unsafe { text(prefix, "prefix")? } };
+        // SAFETY: NULL or NUL-terminated, as the caller promises.
+        let domain = if domain.is_null() { None } else { Some(unsafe { text(domain, "domain")? }.to_string()) };
+        if timeout_ms == 0 {
+            return Err(Failure::invalid("timeout_ms = 0: give the time to wait for the daemon's replies, e.g. 1000"));
+        }
+        let timeout = Duration::from_millis(timeout_ms);
+        let config =
+            ClientConfig { prefix: prefix.to_string(), connect_timeout: timeout, domain, ..ClientConfig::default() };
+        let client = Client::connect(&config)?;
+        let token = NEXT_TOKEN.fetch_add(1, Ordering::Relaxed);
+        clients().insert(token, Arc::new(Slot { client: Mutex::new(client), timeout }));
+        // SAFETY: checked non-null above.
+        unsafe { out.write(std::ptr::without_provenance_mut(token)) };
+        Ok(())
+    })
+}
+
+/// Releases a handle and its connection. NULL is a no-op (`DYFOS_STATUS_OK`), as
+/// with `free(3)`; a handle freed already is `DYFOS_STATUS_NULL_PARAMETER` (a bug in
+/// the caller, detected). A call in progress on another thread finishes first.
+///
+/// # Safety
+/// Always safe to call: the handle is never dereferenced.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_free(client: *mut dyfos_client) -> dyfos_status {
+    boundary(|| {
+        if client.is_null() {
+            return Ok(());
+        }
+        let slot = clients().remove(&client.addr());
+        // Dropped outside the table's lock: closing the ports may take a moment.
+        match slot {
+            Some(slot) => {
+                drop(slot);
+                Ok(())
+            }
+            None => Err(Failure::new(
+                DYFOS_STATUS_NULL_PARAMETER,
+                "`client` is not a live handle: it was freed already (double free), or did not come from dyfos_client_connect",
+            )),
+        }
+    })
+}
+
+/// The daemon's health and counters as a JSON object (as `dyfos stats` prints
+/// it: `pid`, `uptime_s`, `queries_served`, `maps`, `latency_us`, `errors`, ...).
+///
+/// `*json_out` receives a NUL-terminated string the caller owns and frees with
+/// `dyfos_string_free`; it is left untouched on failure.
+///
+/// # Safety
+/// `json_out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_stats(client: *mut dyfos_client, json_out: *mut *mut c_char) -> dyfos_status {
+    boundary(|| {
+        non_null(json_out, "json_out")?;
+        let stats = with_client(client, |c, timeout| Ok(c.stats(timeout)?))?;
+        give_string(json_out, "json_out", json_text(&stats.to_json()))
+    })
+}
+
+/// Makes sure the daemon holds the map of a scenario (SPEC §11 JSON text, as
+/// `dyfos solve` reads) and writes its id to `*map_out` and its version to
+/// `*version_out`. The id is the map's content id, so the same scenario reuses
+/// its map; `DYFOS_STATUS_MAP_EXISTS` if that id holds other content.
+///
+/// `version_out` may be NULL (not wanted); `map_out` may not.
+///
+/// # Safety
+/// `scenario_json` is NULL or NUL-terminated; `map_out` and `version_out` are NULL
+/// or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_upload_scenario(
+    client: *mut dyfos_client,
+    scenario_json: *const c_char,
+    map_out: *mut u64,
+    version_out: *mut u64,
+) -> dyfos_status {
+    boundary(|| {
+        non_null(map_out, "map_out")?;
+        // SAFETY: NULL or NUL-terminated, as the caller promises.
+        let scenario = scenario_from(unsafe { text(scenario_json, "scenario_json")? })?;
+        let (map, version) =
+            with_client(client, |c, timeout| Ok(c.upload_scenario_map(&scenario.world, None, false, timeout)?))?;
+        // SAFETY: non-null (checked above) and writable, as the caller promises.
+        unsafe { write(map_out, "map_out", map)? };
+        if !version_out.is_null() {
+            // SAFETY: non-null and writable, as the caller promises.
+            unsafe { write(version_out, "version_out", version)? };
+        }
+        Ok(())
+    })
+}
+
+fn scenario_from(json: &str) -> Result<Scenario, Failure> {
+    Scenario::from_json(json).map_err(|e| Failure::invalid(format!("scenario: {e}")))
+}
+
+/// Fills `*request` for the rover of a scenario (SPEC §11 JSON text) on map `map`:
+/// `dyfos_rendezvous_request_init`'s defaults, with the scenario's belief and its
+/// parameters (every `set` bit on). Querying it with the seed of
+/// `dyfos solve --seed` gives `dyfos solve`'s answer, bit for bit.
+///
+/// # Safety
+/// `scenario_json` is NULL or NUL-terminated; `request` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_rendezvous_request_from_scenario(
+    scenario_json: *const c_char,
+    map: u64,
+    request: *mut dyfos_rendezvous_request,
+) -> dyfos_status {
+    boundary(|| {
+        non_null(request, "request")?;
+        // SAFETY: NULL or NUL-terminated, as the caller promises.
+        let scenario = scenario_from(unsafe { text(scenario_json, "scenario_json")? })?;
+        let value = dyfos_rendezvous_request {
+            map,
+            mean: scenario.belief.mean.into(),
+            cov: scenario.belief.cov.to_rows(),
+            params: dyfos_params::from_params(&scenario.params, DYFOS_PARAMS_ALL_SET),
+            ..dyfos_rendezvous_request::defaults()
+        };
+        // SAFETY: non-null and writable, as the caller promises.
+        unsafe { write(request, "request", value) }
+    })
+}
+
+/// Creates an empty map `map` at version 0 with `bounds` (4 doubles: x_min, y_min,
+/// x_max, y_max, m) and the sun (elevation, azimuth, rad); writes the version (0)
+/// to `*version_out` unless it is NULL. `DYFOS_STATUS_MAP_EXISTS` if the id is taken.
+///
+/// # Safety
+/// `bounds` is NULL or points to 4 readable doubles; `version_out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_create_map(
+    client: *mut dyfos_client,
+    map: u64,
+    bounds: *const f64,
+    sun_elevation: f64,
+    sun_azimuth: f64,
+    version_out: *mut u64,
+) -> dyfos_status {
+    boundary(|| {
+        // SAFETY: NULL or 4 readable doubles, as the caller promises.
+        let b = unsafe { required(bounds.cast::<[f64; 4]>(), "bounds")? };
+        let bounds = Bounds::new(*b).map_err(|e| Failure::invalid(format!("bounds: {e}")))?;
+        let sun = Sun::new(sun_elevation, sun_azimuth).map_err(|e| Failure::invalid(format!("sun: {e}")))?;
+        let version = with_client(client, |c, timeout| Ok(c.create_map(map, bounds, sun, timeout)?))?;
+        if !version_out.is_null() {
+            // SAFETY: non-null and writable, as the caller promises.
+            unsafe { write(version_out, "version_out", version)? };
+        }
+        Ok(())
+    })
+}
+
+/// Applies map deltas (a JSON array, the format of `dyfos map apply` files) to map
+/// `map` as one atomic batch and writes the new version to `*version_out` unless it
+/// is NULL. With `expected_version` other than `DYFOS_ANY_VERSION`, the map must be
+/// at that version first (else `DYFOS_STATUS_MAP_VERSION_MISMATCH`, nothing applied).
+///
+/// # Safety
+/// `deltas_json` is NULL or NUL-terminated; `version_out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_apply(
+    client: *mut dyfos_client,
+    map: u64,
+    deltas_json: *const c_char,
+    expected_version: u64,
+    version_out: *mut u64,
+) -> dyfos_status {
+    boundary(|| {
+        // SAFETY: NULL or NUL-terminated, as the caller promises.
+        let deltas = deltas_from_json(unsafe { text(deltas_json, "deltas_json")? })?;
+        let expected = (expected_version != DYFOS_ANY_VERSION).then_some(expected_version);
+        let version = with_client(client, |c, timeout| Ok(c.apply(map, expected, &deltas, timeout)?))?;
+        if !version_out.is_null() {
+            // SAFETY: non-null and writable, as the caller promises.
+            unsafe { write(version_out, "version_out", version)? };
+        }
+        Ok(())
+    })
+}
+
+/// The map as it is now, as a JSON object (`version`, `bounds`, `sun`,
+/// `obstacles` in scenario form, `voxels` if any: `dyfos map snapshot` without its
+/// `map` field), printed as `dyfos` prints it.
+///
+/// `*json_out` receives a NUL-terminated string the caller owns and frees with
+/// `dyfos_string_free`; it is left untouched on failure.
+///
+/// # Safety
+/// `json_out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_snapshot(
+    client: *mut dyfos_client,
+    map: u64,
+    json_out: *mut *mut c_char,
+) -> dyfos_status {
+    boundary(|| {
+        non_null(json_out, "json_out")?;
+        let world = with_client(client, |c, timeout| Ok(c.snapshot(map, timeout)?))?;
+        give_string(json_out, "json_out", json_text(&world.to_json()))
+    })
+}
+
+/// Asks the daemon for the optimal sensor pose for `*request` and writes it to
+/// `*answer_out` (a struct the caller owns; nothing to free). Waits at most the
+/// handle's timeout; give the request a `deadline_micros` shorter than that to get
+/// the best pose found in time.
+///
+/// # Safety
+/// `request` is NULL or points to an initialised request whose `deltas_json` is
+/// NULL or NUL-terminated; `answer_out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_rendezvous(
+    client: *mut dyfos_client,
+    request: *const dyfos_rendezvous_request,
+    answer_out: *mut dyfos_answer,
+) -> dyfos_status {
+    boundary(|| {
+        non_null(answer_out, "answer_out")?;
+        // SAFETY: NULL or a valid request with a valid `deltas_json`, as the caller promises.
+        let request = unsafe { required(request, "request")?.decode()? };
+        let answer = with_client(client, |c, timeout| Ok(c.rendezvous(&request, timeout)?))?;
+        // SAFETY: non-null and writable, as the caller promises.
+        unsafe { write(answer_out, "answer_out", dyfos_answer::from(&answer)) }
+    })
+}
+
+/// Sends `*request` in check mode: the daemon validates everything (map id and
+/// version, belief, parameters, deltas on a copy of the map) and answers at once
+/// without searching or changing the map; writes the version the query would
+/// search to `*map_version_out`. The round-trip floor, for latency and health checks.
+///
+/// # Safety
+/// As `dyfos_client_rendezvous`; `map_version_out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_check(
+    client: *mut dyfos_client,
+    request: *const dyfos_rendezvous_request,
+    map_version_out: *mut u64,
+) -> dyfos_status {
+    boundary(|| {
+        non_null(map_version_out, "map_version_out")?;
+        // SAFETY: NULL or a valid request with a valid `deltas_json`, as the caller promises.
+        let request = unsafe { required(request, "request")?.decode()? };
+        let checked = with_client(client, |c, timeout| Ok(c.check(&request, timeout)?))?;
+        // SAFETY: non-null and writable, as the caller promises.
+        unsafe { write(map_version_out, "map_version_out", checked.map_version) }
+    })
+}
+
+/// The answer as the JSON text `dyfos solve` prints (same keys, same numbers, same
+/// layout; without the final newline).
+///
+/// `*json_out` receives a NUL-terminated string the caller owns and frees with
+/// `dyfos_string_free`; it is left untouched on failure.
+///
+/// # Safety
+/// `answer` is NULL or points to an initialised answer; `json_out` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_answer_to_json(answer: *const dyfos_answer, json_out: *mut *mut c_char) -> dyfos_status {
+    boundary(|| {
+        non_null(json_out, "json_out")?;
+        // SAFETY: NULL or a valid answer, as the caller promises.
+        let answer = unsafe { required(answer, "answer")? }.decode()?;
+        give_string(json_out, "json_out", json_text(&answer.to_json()))
+    })
+}
+
+/// Writes `dyfos_rendezvous_request`'s defaults to `*request`: map 0, any version,
+/// a zero belief (set `mean` and `cov`), algorithm dyfos, seed 0, no budget,
+/// deadline or deltas, every parameter at its SPEC default (`params.set` = 0).
+///
+/// # Safety
+/// `request` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_rendezvous_request_init(request: *mut dyfos_rendezvous_request) -> dyfos_status {
+    // SAFETY: NULL or writable, as the caller promises.
+    boundary(|| unsafe { write(request, "request", dyfos_rendezvous_request::defaults()) })
+}
+
+/// Writes the SPEC §11 defaults to `*params` with `set` = 0 (every field default).
+///
+/// # Safety
+/// `params` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_params_init(params: *mut dyfos_params) -> dyfos_status {
+    // SAFETY: NULL or writable, as the caller promises.
+    boundary(|| unsafe { write(params, "params", dyfos_params::from_params(&Default::default(), 0)) })
+}
+
+/// Parses parameters given as a JSON object of SPEC §11 names (e.g.
+/// `{"lambda": 2.0, "model": "anisotropic"}`; anything left out is the default) into
+/// `*params`, with every `set` bit on. `DYFOS_STATUS_INVALID_ARGUMENT` names an
+/// unknown field or a value out of range.
+///
+/// # Safety
+/// `json` is NULL or NUL-terminated; `params` is NULL or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_params_from_json(json: *const c_char, params: *mut dyfos_params) -> dyfos_status {
+    boundary(|| {
+        non_null(params, "params")?;
+        // SAFETY: NULL or NUL-terminated, as the caller promises.
+        let parsed =
+            params_from_json(unsafe { text(json, "json")? }).map_err(|e| Failure::invalid(format!("params: {e}")))?;
+        // SAFETY: non-null and writable, as the caller promises.
+        unsafe { write(params, "params", dyfos_params::from_params(&parsed, DYFOS_PARAMS_ALL_SET)) }
+    })
+}
+
+/// Frees a string this library returned. NULL is a no-op.
+///
+/// # Safety
+/// `s` is NULL or a string returned by this library and not freed yet; freeing
+/// anything else (or twice) is undefined behaviour, as with `free(3)`.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_string_free(s: *mut c_char) {
+    let _ = boundary(|| {
+        if !s.is_null() {
+            // SAFETY: `s` came from `CString::into_raw` in this library and is freed
+            // once, as the caller promises.
+            drop(unsafe { CString::from_raw(s) });
+        }
+        Ok(())
+    });
+}
+
+/// Copies this thread's last error message (the failure of the last call on this
+/// thread; empty after a success) into `buf` as a NUL-terminated UTF-8 string and
+/// returns the message's full length in bytes, without the NUL. If that is ≥ `len`,
+/// the copy was truncated (at a character boundary) to fit: call again with a
+/// buffer of the returned length + 1. `buf` may be NULL when `len` is 0, to ask
+/// the length. The message of a wire error is the daemon's sentence.
+///
+/// # Safety
+/// `buf` is NULL or points to `len` writable bytes.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_last_error(buf: *mut c_char, len: usize) -> usize {
+    let copy = |message: &str| {
+        if !buf.is_null() && len > 0 {
+            let mut end = message.len().min(len - 1);
+            while !message.is_char_boundary(end) {
+                end -= 1;
+            }
+            // SAFETY: `buf` has `len` writable bytes (caller's promise); we write
+            // `end + 1 <= len` of them, from a distinct Rust string.
+            unsafe {
+                std::ptr::copy_nonoverlapping(message.as_ptr(), buf.cast::<u8>(), end);
+                buf.add(end).write(0);
+            }
+        }
+        message.len()
+    };
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| with_last_error(copy).unwrap_or(0))).unwrap_or(0)
+}
+
+/// The snake_case name of a status code (`"ok"`, `"map_version_mismatch"`,
+/// `"null_parameter"`, ...), or `"unknown_status"`. A static string: do not free it.
+#[unsafe(no_mangle)]
+pub extern "C" fn dyfos_status_name(status: dyfos_status) -> *const c_char {
+    let name = std::panic::catch_unwind(|| match status_name(status) {
+        Some(n) => STATUS_C_NAMES.iter().find(|c| c.to_bytes() == n.as_bytes()).copied(),
+        None => None,
+    });
+    name.ok().flatten().unwrap_or(c"unknown_status").as_ptr()
+}
+
+/// Every status name as a C string (`dyfos_status_name` hands these out).
+const STATUS_C_NAMES: [&std::ffi::CStr; 30] = [
+    c"ok",
+    c"malformed_request",
+    c"invalid_algorithm",
+    c"invalid_belief",
+    c"invalid_params",
+    c"unsupported_model",
+    c"invalid_deadline",
+    c"malformed_delta",
+    c"invalid_delta",
+    c"unknown_map",
+    c"map_version_mismatch",
+    c"map_exists",
+    c"over_capacity",
+    c"chunk_out_of_order",
+    c"chunk_duplicate",
+    c"chunk_incomplete",
+    c"no_feasible_pose",
+    c"deadline_exceeded",
+    c"busy",
+    c"storage_failed",
+    c"shutting_down",
+    c"internal_error",
+    c"null_parameter",
+    c"invalid_argument",
+    c"no_daemon",
+    c"daemon_gone",
+    c"timeout",
+    c"ipc",
+    c"panic",
+    c"incompatible_daemon",
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::ffi::CStr;
+
+    fn last_error() -> String {
+        // SAFETY: NULL with length 0 asks the length only.
+        let n = unsafe { dyfos_last_error(std::ptr::null_mut(), 0) };
+        let mut buf = vec![0u8; n + 1];
+        // SAFETY: `buf` has n + 1 writable bytes.
+        assert_eq!(unsafe { dyfos_last_error(buf.as_mut_ptr().cast(), buf.len()) }, n);
+        CStr::from_bytes_until_nul(&buf).unwrap().to_str().unwrap().to_string()
+    }
+
+    #[test]
+    fn every_status_has_its_c_name() {
+        for code in (0..=21).chain(CLIENT_CODES.iter().map(|(c, _)| *c)) {
+            // SAFETY: a static NUL-terminated string.
+            let name = unsafe { CStr::from_ptr(dyfos_status_name(code)) }.to_str().unwrap();
+            assert_eq!(Some(name), status_name(code));
+        }
+        // SAFETY: as above.
+        assert_eq!(unsafe { CStr::from_ptr(dyfos_status_name(77)) }, c"unknown_status");
+    }
+
+    #[test]
+    fn null_and_stale_handles_are_refused_with_the_null_parameter_code() {
+        let mut json: *mut c_char = std::ptr::null_mut();
+        let mut version = 0u64;
+        // SAFETY (all calls below): every pointer is NULL, a made-up handle token
+        // (never dereferenced by the library), or points to a local.
+        unsafe {
+            assert_eq!(dyfos_client_stats(std::ptr::null_mut(), &mut json), DYFOS_STATUS_NULL_PARAMETER);
+            assert!(last_error().contains("`client` is NULL"), "{}", last_error());
+            let made_up = std::ptr::without_provenance_mut::<dyfos_client>(0xdead_0000);
+            assert_eq!(dyfos_client_stats(made_up, &mut json), DYFOS_STATUS_NULL_PARAMETER);
+            assert!(last_error().contains("not a live handle"), "{}", last_error());
+            assert_eq!(dyfos_client_free(made_up), DYFOS_STATUS_NULL_PARAMETER);
+            assert_eq!(dyfos_client_free(std::ptr::null_mut()), DYFOS_STATUS_OK);
+            assert_eq!(last_error(), "");
+            let bounds = [0.0, 0.0, 1.0, 1.0];
+            assert_eq!(
+                dyfos_client_create_map(made_up, 1, bounds.as_ptr(), 0.5, 0.5, &mut version),
+                DYFOS_STATUS_NULL_PARAMETER
+            );
+            assert_eq!(
+                dyfos_client_create_map(made_up, 1, std::ptr::null(), 0.5, 0.5, &mut version),
+                DYFOS_STATUS_NULL_PARAMETER
+            );
+            assert_eq!(dyfos_client_stats(made_up, std::ptr::null_mut()), DYFOS_STATUS_NULL_PARAMETER);
+            assert!(last_error().contains("json_out"), "{}", last_error());
+            assert_eq!(dyfos_rendezvous_request_init(std::ptr::null_mut()), DYFOS_STATUS_NULL_PARAMETER);
+            assert_eq!(dyfos_params_init(std::ptr::null_mut()), DYFOS_STATUS_NULL_PARAMETER);
+            assert_eq!(dyfos_answer_to_json(std::ptr::null(), &mut json), DYFOS_STATUS_NULL_PARAMETER);
+            assert_eq!(
+                dyfos_client_connect(std::ptr::null(), std::ptr::null(), 10, std::ptr::null_mut()),
+                DYFOS_STATUS_NULL_PARAMETER
+            );
+            dyfos_string_free(std::ptr::null_mut());
+        }
+        assert!(json.is_null(), "no string handed out on failure");
+    }
+
+    #[test]
+    fn bad_arguments_are_refused_before_any_ipc() {
+        let mut handle: *mut dyfos_client = std::ptr::null_mut();
+        // SAFETY: valid C strings and a local output.
+        unsafe {
+            assert_eq!(dyfos_client_connect(c"bad prefix".as_ptr(), std::ptr::null(), 10, &mut handle), 1001);
+            assert!(last_error().contains("bad prefix"), "{}", last_error());
+            assert_eq!(dyfos_client_connect(std::ptr::null(), c"a/b".as_ptr(), 10, &mut handle), 1001);
+            assert_eq!(dyfos_client_connect(std::ptr::null(), std::ptr::null(), 0, &mut handle), 1001);
+            let not_utf8 = [0xffu8, 0];
+            assert_eq!(dyfos_client_connect(not_utf8.as_ptr().cast(), std::ptr::null(), 10, &mut handle), 1001);
+            assert!(last_error().contains("UTF-8"), "{}", last_error());
+        }
+        assert!(handle.is_null());
+    }
+
+    #[test]
+    fn last_error_truncates_at_a_character_boundary_and_reports_the_full_length() {
+        let message = "é".repeat(10); // 20 bytes
+        assert_eq!(boundary(|| Err(Failure::invalid(message.clone()))), DYFOS_STATUS_INVALID_ARGUMENT);
+        let mut buf = [0x55u8; 6];
+        // SAFETY: `buf` has 6 writable bytes.
+        assert_eq!(unsafe { dyfos_last_error(buf.as_mut_ptr().cast(), buf.len()) }, 20);
+        // 5 bytes fit; the boundary is at 4: "éé" and the NUL.
+        assert_eq!(CStr::from_bytes_until_nul(&buf).unwrap().to_str().unwrap(), "éé");
+        assert_eq!(last_error(), message);
+    }
+
+    #[test]
+    fn params_from_json_sets_every_bit_and_names_bad_fields() {
+        let mut p = dyfos_params::default();
+        // SAFETY: valid C strings and a local output.
+        unsafe {
+            assert_eq!(dyfos_params_from_json(cr#"{"lambda": 2.0}"#.as_ptr(), &mut p), DYFOS_STATUS_OK);
+            assert_eq!((p.lambda, p.set), (2.0, DYFOS_PARAMS_ALL_SET));
+            assert_eq!(dyfos_params_from_json(cr#"{"rho_mim": 2}"#.as_ptr(), &mut p), 1001);
+            assert!(last_error().contains("rho_min"), "{}", last_error());
+            assert_eq!(dyfos_params_init(&mut p), DYFOS_STATUS_OK);
+        }
+        assert_eq!((p.set, p.to_params().unwrap()), (0, dyfos_shared::params::Params::default()));
+    }
+
+    #[test]
+    fn json_text_prints_like_the_cli() {
+        let v = serde_json::json!({"a": 1, "b": [0.1, 2.0], "c": "x"});
+        assert_eq!(json_text(&v), "{\n  \"a\": 1,\n  \"b\": [0.1,2.0],\n  \"c\": \"x\"\n}");
+        assert_eq!(json_text(&serde_json::json!([1])), "[1]");
+    }
+}

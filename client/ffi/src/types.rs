@@ -1,0 +1,561 @@
+//! The plain C structs of the API (parameters, rendezvous request, answer), their
+//! codes, and their conversions to and from the Rust client's types.
+
+use crate::status::{
+    DYFOS_STATUS_INVALID_ALGORITHM, DYFOS_STATUS_INVALID_BELIEF, DYFOS_STATUS_NULL_PARAMETER, Failure,
+};
+use dyfos_shared::answer::{Algorithm, Answer, EvalStats, StopReason};
+use dyfos_shared::math::{Matrix3, Point3, UnitQuaternion, canonical_xyzw, rows3};
+use dyfos_shared::params::Params;
+use dyfos_shared::posterior::Belief;
+use dyfos_shared::sensor::SensorState;
+use dyfos_shared::wire::rendezvous::{RendezvousRequest, WireParams};
+use dyfos_shared::world::MapDelta;
+use std::ffi::{CStr, c_char};
+use std::time::Duration;
+
+/// `expected_version` that accepts any map version.
+pub const DYFOS_ANY_VERSION: u64 = u64::MAX;
+
+/// Differential evolution with a final local polish (the DyFOS optimizer).
+pub const DYFOS_ALGORITHM_DYFOS: u32 = 0;
+/// Differential evolution exactly as SciPy's defaults, no polish (the paper's).
+pub const DYFOS_ALGORITHM_DYFOS_SCIPY: u32 = 1;
+/// Exhaustive grid on all of the daemon's workers.
+pub const DYFOS_ALGORITHM_BRUTE: u32 = 2;
+/// Uniform samples until the first feasible one.
+pub const DYFOS_ALGORITHM_RANDOM: u32 = 3;
+/// Rover in the image centre, uniform ρ and yaw until the first feasible one.
+pub const DYFOS_ALGORITHM_CENTER: u32 = 4;
+
+/// `dyfos_params.model`: the paper's isotropic linear SDSMM (the default).
+pub const DYFOS_MODEL_PAPER: u32 = 0;
+/// `dyfos_params.model`: `paper`'s variance stretched along the line of sight.
+pub const DYFOS_MODEL_ANISOTROPIC: u32 = 1;
+/// `dyfos_params.model`: the trained network (the daemon needs its weights).
+pub const DYFOS_MODEL_LEARNED: u32 = 2;
+
+/// `dyfos_answer.stop`: the search ran to its natural end.
+pub const DYFOS_STOP_FINISHED: u32 = 0;
+/// `dyfos_answer.stop`: differential evolution hit its generation cap.
+pub const DYFOS_STOP_MAX_GENERATIONS: u32 = 1;
+/// `dyfos_answer.stop`: the request's evaluation budget ran out.
+pub const DYFOS_STOP_BUDGET: u32 = 2;
+/// `dyfos_answer.stop`: the deadline passed; the answer is the best found so far.
+pub const DYFOS_STOP_DEADLINE: u32 = 3;
+/// `dyfos_answer.stop`: the search was abandoned (never in an answer the daemon sends).
+pub const DYFOS_STOP_ABANDONED: u32 = 4;
+
+/// `dyfos_params.set` bit of `rover_radius`.
+pub const DYFOS_PARAM_ROVER_RADIUS: u32 = 1 << 0;
+/// `dyfos_params.set` bit of `marker_size`.
+pub const DYFOS_PARAM_MARKER_SIZE: u32 = 1 << 1;
+/// `dyfos_params.set` bit of `marker_height`.
+pub const DYFOS_PARAM_MARKER_HEIGHT: u32 = 1 << 2;
+/// `dyfos_params.set` bit of `viewer_radius`.
+pub const DYFOS_PARAM_VIEWER_RADIUS: u32 = 1 << 3;
+/// `dyfos_params.set` bit of `safety_margin`.
+pub const DYFOS_PARAM_SAFETY_MARGIN: u32 = 1 << 4;
+/// `dyfos_params.set` bit of `z_min`.
+pub const DYFOS_PARAM_Z_MIN: u32 = 1 << 5;
+/// `dyfos_params.set` bit of `z_max`.
+pub const DYFOS_PARAM_Z_MAX: u32 = 1 << 6;
+/// `dyfos_params.set` bit of `camera_pitch`.
+pub const DYFOS_PARAM_CAMERA_PITCH: u32 = 1 << 7;
+/// `dyfos_params.set` bit of `t_vs`.
+pub const DYFOS_PARAM_T_VS: u32 = 1 << 8;
+/// `dyfos_params.set` bit of `f_h`.
+pub const DYFOS_PARAM_F_H: u32 = 1 << 9;
+/// `dyfos_params.set` bit of `f_v`.
+pub const DYFOS_PARAM_F_V: u32 = 1 << 10;
+/// `dyfos_params.set` bit of `rho_min`.
+pub const DYFOS_PARAM_RHO_MIN: u32 = 1 << 11;
+/// `dyfos_params.set` bit of `rho_max`.
+pub const DYFOS_PARAM_RHO_MAX: u32 = 1 << 12;
+/// `dyfos_params.set` bit of `kappa`.
+pub const DYFOS_PARAM_KAPPA: u32 = 1 << 13;
+/// `dyfos_params.set` bit of `lambda`.
+pub const DYFOS_PARAM_LAMBDA: u32 = 1 << 14;
+/// `dyfos_params.set` bit of `perimeter_points`.
+pub const DYFOS_PARAM_PERIMETER_POINTS: u32 = 1 << 15;
+/// `dyfos_params.set` bit of `model`.
+pub const DYFOS_PARAM_MODEL: u32 = 1 << 16;
+/// `dyfos_params.set` with every field given.
+pub const DYFOS_PARAMS_ALL_SET: u32 = (1 << 17) - 1;
+
+/// Every parameter of SPEC §11 (units as there: metres, radians). `set` says which
+/// fields are given: bit `DYFOS_PARAM_<NAME>` set means the field is used, clear
+/// means the SPEC default is used and the field is ignored. So a request whose
+/// `set` is 0 uses every default, and overriding one parameter is
+/// `p.lambda = 2.0; p.set |= DYFOS_PARAM_LAMBDA;`. `dyfos_params_init` fills the
+/// fields with the defaults (so they can be read) and clears `set`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct dyfos_params {
+    /// Rover footprint radius, m.
+    pub rover_radius: f64,
+    /// Marker side, m.
+    pub marker_size: f64,
+    /// Marker height above ground, m.
+    pub marker_height: f64,
+    /// Viewer body radius, m.
+    pub viewer_radius: f64,
+    /// Extra clearance for the collision rays, m.
+    pub safety_margin: f64,
+    /// Lowest viewer altitude, m.
+    pub z_min: f64,
+    /// Highest viewer altitude, m.
+    pub z_max: f64,
+    /// Downward camera pitch, rad.
+    pub camera_pitch: f64,
+    /// Camera offset in the viewer frame, m.
+    pub t_vs: [f64; 3],
+    /// Horizontal field of view, rad.
+    pub f_h: f64,
+    /// Vertical field of view, rad.
+    pub f_v: f64,
+    /// Least sensor-to-marker distance, m.
+    pub rho_min: f64,
+    /// Greatest sensor-to-marker distance, m.
+    pub rho_max: f64,
+    /// SDSMM noise scale.
+    pub kappa: f64,
+    /// SDSMM anisotropy.
+    pub lambda: f64,
+    /// Target points on the footprint circle besides the marker centre.
+    pub perimeter_points: u32,
+    /// One of `DYFOS_MODEL_*`.
+    pub model: u32,
+    /// Which fields are given: `DYFOS_PARAM_*` bits; a clear bit means the SPEC default.
+    pub set: u32,
+}
+
+impl From<&dyfos_params> for WireParams {
+    fn from(p: &dyfos_params) -> Self {
+        WireParams {
+            rover_radius: p.rover_radius,
+            marker_size: p.marker_size,
+            marker_height: p.marker_height,
+            viewer_radius: p.viewer_radius,
+            safety_margin: p.safety_margin,
+            z_min: p.z_min,
+            z_max: p.z_max,
+            camera_pitch: p.camera_pitch,
+            t_vs: p.t_vs,
+            f_h: p.f_h,
+            f_v: p.f_v,
+            rho_min: p.rho_min,
+            rho_max: p.rho_max,
+            kappa: p.kappa,
+            lambda: p.lambda,
+            perimeter_points: p.perimeter_points,
+            model: p.model,
+            set: p.set,
+            reserved: 0,
+        }
+    }
+}
+
+impl dyfos_params {
+    /// `params`' values with the given `set` bits.
+    pub(crate) fn from_params(params: &Params, set: u32) -> Self {
+        let w = WireParams::from(params);
+        dyfos_params {
+            rover_radius: w.rover_radius,
+            marker_size: w.marker_size,
+            marker_height: w.marker_height,
+            viewer_radius: w.viewer_radius,
+            safety_margin: w.safety_margin,
+            z_min: w.z_min,
+            z_max: w.z_max,
+            camera_pitch: w.camera_pitch,
+            t_vs: w.t_vs,
+            f_h: w.f_h,
+            f_v: w.f_v,
+            rho_min: w.rho_min,
+            rho_max: w.rho_max,
+            kappa: w.kappa,
+            lambda: w.lambda,
+            perimeter_points: w.perimeter_points,
+            model: w.model,
+            set,
+        }
+    }
+
+    /// Decodes and validates (SPEC §11 ranges); unset fields take the default.
+    pub(crate) fn to_params(self) -> Result<Params, Failure> {
+        if self.set == 0 {
+            // What `Params::try_from` gives for no field set, without its checks.
+            return Ok(Params::default());
+        }
+        Params::try_from(&WireParams::from(&self)).map_err(Failure::from)
+    }
+}
+
+/// A rendezvous query (SPEC §8): where should the viewer's camera be to localize
+/// the rover on map `map`, whose a priori belief is `mean`/`cov`? Fill it with
+/// `dyfos_rendezvous_request_init` first (every parameter at its default,
+/// algorithm dyfos, seed 0, any version, no budget, deadline or deltas), then set
+/// the map, the belief and whatever else differs.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub struct dyfos_rendezvous_request {
+    /// The map to search.
+    pub map: u64,
+    /// The version the map must have before `deltas_json`, or `DYFOS_ANY_VERSION`.
+    pub expected_version: u64,
+    /// Belief mean (x, y, θ): m, m, rad.
+    pub mean: [f64; 3],
+    /// Belief covariance Σ⁻, rows; symmetric positive definite.
+    pub cov: [[f64; 3]; 3],
+    /// One of `DYFOS_ALGORITHM_*`.
+    pub algorithm: u32,
+    /// Seed of the search's random stream: the same request and seed give the same
+    /// answer, bit for bit.
+    pub seed: u64,
+    /// Most candidates to evaluate; 0 for the algorithm's own limits.
+    pub budget: u64,
+    /// Time the daemon has from receipt to answer, µs; 0 for none. When it passes
+    /// the answer is the best pose so far (`stop` = `DYFOS_STOP_DEADLINE`), or
+    /// `DYFOS_STATUS_DEADLINE_EXCEEDED` if none was feasible yet.
+    pub deadline_micros: u64,
+    /// Parameters; fields whose `set` bit is clear take the SPEC default.
+    pub params: dyfos_params,
+    /// Map deltas applied (all or none) before the search, as a JSON array in the
+    /// format of `dyfos map apply` files; NULL for none. Borrowed for the call only.
+    pub deltas_json: *const c_char,
+}
+
+impl dyfos_rendezvous_request {
+    /// The defaults `dyfos_rendezvous_request_init` writes: map 0, a zero belief (to
+    /// be set: a zero covariance is `DYFOS_STATUS_INVALID_BELIEF`).
+    pub(crate) fn defaults() -> Self {
+        dyfos_rendezvous_request {
+            map: 0,
+            expected_version: DYFOS_ANY_VERSION,
+            mean: [0.0; 3],
+            cov: [[0.0; 3]; 3],
+            algorithm: DYFOS_ALGORITHM_DYFOS,
+            seed: 0,
+            budget: 0,
+            deadline_micros: 0,
+            params: dyfos_params::from_params(&Params::default(), 0),
+            deltas_json: std::ptr::null(),
+        }
+    }
+
+    /// The Rust client's request. Checks what the client needs valid (belief,
+    /// algorithm, parameters) with the codes the daemon would use.
+    ///
+    /// # Safety
+    /// `self.deltas_json` is NULL or a NUL-terminated string valid for the call.
+    pub(crate) unsafe fn decode(&self) -> Result<RendezvousRequest, Failure> {
+        let belief = Belief::new(self.mean, self.cov)
+            .map_err(|e| Failure::new(DYFOS_STATUS_INVALID_BELIEF, format!("belief: {e}")))?;
+        let algorithm = *Algorithm::ALL.get(self.algorithm as usize).ok_or_else(|| {
+            Failure::new(
+                DYFOS_STATUS_INVALID_ALGORITHM,
+                format!(
+                    "algorithm = {} is not an algorithm (0 dyfos, 1 dyfos-scipy, 2 brute, 3 random, 4 center)",
+                    self.algorithm
+                ),
+            )
+        })?;
+        let params = self.params.to_params()?;
+        let deltas = if self.deltas_json.is_null() {
+            Vec::new()
+        } else {
+            // SAFETY: non-null, and the caller promises a NUL-terminated string.
+            let text = unsafe { crate::text(self.deltas_json, "deltas_json")? };
+            deltas_from_json(text)?
+        };
+        Ok(RendezvousRequest {
+            map: self.map,
+            expected_version: (self.expected_version != DYFOS_ANY_VERSION).then_some(self.expected_version),
+            belief,
+            deltas,
+            algorithm,
+            seed: self.seed,
+            budget: (self.budget != 0).then_some(self.budget),
+            deadline: (self.deadline_micros != 0).then(|| Duration::from_micros(self.deadline_micros)),
+            params,
+        })
+    }
+}
+
+/// Map deltas from a JSON array (the `dyfos map apply` file format).
+pub(crate) fn deltas_from_json(text: &str) -> Result<Vec<MapDelta>, Failure> {
+    serde_json::from_str(text).map_err(|e| Failure::invalid(format!("deltas: not a JSON array of map deltas: {e}")))
+}
+
+/// Candidates evaluated, split by the first constraint that rejected them.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct dyfos_evaluations {
+    /// Every candidate evaluated.
+    pub total: u64,
+    /// Rejected: viewer outside the bounds or the altitude limits.
+    pub workspace: u64,
+    /// Rejected: viewer too close to an obstacle.
+    pub collision: u64,
+    /// Rejected: the line of sight to the rover is blocked.
+    pub occlusion: u64,
+}
+
+/// The optimal sensor state found (SPEC §8), every field `dyfos solve` prints.
+/// `dyfos_answer_to_json` gives the same JSON text.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct dyfos_answer {
+    /// The algorithm that found it, one of `DYFOS_ALGORITHM_*`.
+    pub algorithm: u32,
+    /// Why the search stopped, one of `DYFOS_STOP_*`; `DYFOS_STOP_DEADLINE` means
+    /// the best pose found in time, not converged.
+    pub stop: u32,
+    /// The map version searched (after the request's deltas).
+    pub map_version: u64,
+    /// The candidate x = (ρ, ψ, φ, ψ_v): m, rad, rad, rad.
+    pub x: [f64; 4],
+    /// E = ln det Σ⁺.
+    pub cost: f64,
+    /// Sensor position p_s, m.
+    pub sensor_position: [f64; 3],
+    /// Sensor orientation R_ws as a quaternion (x, y, z, w), w ≥ 0.
+    pub sensor_quaternion: [f64; 4],
+    /// Viewer position p_v, m.
+    pub viewer_position: [f64; 3],
+    /// Viewer yaw ψ_v, rad.
+    pub viewer_yaw: f64,
+    /// Predicted measurement noise R, rows.
+    pub r: [[f64; 2]; 2],
+    /// Predicted posterior Σ⁺, rows.
+    pub posterior: [[f64; 3]; 3],
+    /// Evaluation counts.
+    pub evaluations: dyfos_evaluations,
+    /// The search's compute time, µs.
+    pub micros: u64,
+}
+
+fn stop_code(s: StopReason) -> u32 {
+    match s {
+        StopReason::Finished => DYFOS_STOP_FINISHED,
+        StopReason::MaxGenerations => DYFOS_STOP_MAX_GENERATIONS,
+        StopReason::Budget => DYFOS_STOP_BUDGET,
+        StopReason::Deadline => DYFOS_STOP_DEADLINE,
+        StopReason::Abandoned => DYFOS_STOP_ABANDONED,
+    }
+}
+
+impl From<&Answer> for dyfos_answer {
+    fn from(a: &Answer) -> Self {
+        let e = a.evaluations;
+        dyfos_answer {
+            algorithm: Algorithm::ALL.iter().position(|x| *x == a.algorithm).unwrap_or(0) as u32,
+            stop: stop_code(a.stop),
+            map_version: a.map_version,
+            x: a.x.to_array(),
+            cost: a.cost,
+            sensor_position: a.sensor_position.coords.into(),
+            sensor_quaternion: canonical_xyzw(&a.sensor_orientation),
+            viewer_position: a.viewer_position.coords.into(),
+            viewer_yaw: a.viewer_yaw,
+            r: a.r,
+            posterior: rows3(&a.posterior),
+            evaluations: dyfos_evaluations {
+                total: e.total,
+                workspace: e.workspace,
+                collision: e.collision,
+                occlusion: e.occlusion,
+            },
+            micros: a.micros,
+        }
+    }
+}
+
+impl dyfos_answer {
+    /// Rebuilds the answer (for its JSON); codes written by the caller are checked.
+    pub(crate) fn decode(&self) -> Result<Answer, Failure> {
+        let a = self;
+        let algorithm = *Algorithm::ALL
+            .get(a.algorithm as usize)
+            .ok_or_else(|| Failure::invalid(format!("answer.algorithm = {} is not an algorithm", a.algorithm)))?;
+        let stop = match a.stop {
+            DYFOS_STOP_FINISHED => StopReason::Finished,
+            DYFOS_STOP_MAX_GENERATIONS => StopReason::MaxGenerations,
+            DYFOS_STOP_BUDGET => StopReason::Budget,
+            DYFOS_STOP_DEADLINE => StopReason::Deadline,
+            DYFOS_STOP_ABANDONED => StopReason::Abandoned,
+            s => return Err(Failure::invalid(format!("answer.stop = {s} is not a stop reason"))),
+        };
+        let [i, j, k, w] = a.sensor_quaternion;
+        let e = a.evaluations;
+        Ok(Answer {
+            algorithm,
+            // Not `from_array`: re-wrapping the yaw could change its last bit.
+            x: SensorState { rho: a.x[0], psi: a.x[1], phi: a.x[2], yaw: a.x[3] },
+            cost: a.cost,
+            sensor_position: Point3::from(a.sensor_position),
+            sensor_orientation: UnitQuaternion::new_unchecked(nalgebra_quaternion(w, i, j, k)),
+            viewer_position: Point3::from(a.viewer_position),
+            viewer_yaw: a.viewer_yaw,
+            r: a.r,
+            posterior: Matrix3::from_fn(|r, c| a.posterior[r][c]),
+            evaluations: EvalStats {
+                total: e.total,
+                workspace: e.workspace,
+                collision: e.collision,
+                occlusion: e.occlusion,
+            },
+            micros: a.micros,
+            map_version: a.map_version,
+            stop,
+        })
+    }
+}
+
+fn nalgebra_quaternion(w: f64, i: f64, j: f64, k: f64) -> dyfos_shared::prelude::na::Quaternion<f64> {
+    dyfos_shared::prelude::na::Quaternion::new(w, i, j, k)
+}
+
+/// A required input pointer, or the null-parameter failure naming it.
+///
+/// # Safety
+/// `ptr` is NULL or points to a valid, initialised `T` for `'a`.
+pub(crate) unsafe fn required<'a, T>(ptr: *const T, what: &str) -> Result<&'a T, Failure> {
+    // SAFETY: as the caller promises.
+    unsafe { ptr.as_ref() }.ok_or_else(|| Failure::null(what))
+}
+
+/// Fails naming `what` if the output pointer `ptr` is NULL (checked before any work).
+pub(crate) fn non_null<T>(ptr: *mut T, what: &str) -> Result<(), Failure> {
+    if ptr.is_null() {
+        return Err(Failure {
+            code: DYFOS_STATUS_NULL_PARAMETER,
+            message: format!("output `{what}` is NULL; pass where to write it"),
+        });
+    }
+    Ok(())
+}
+
+/// Writes `value` through a required output pointer, or fails naming it.
+///
+/// # Safety
+/// `ptr` is NULL or points to memory writable as one `T` (initialised or not).
+pub(crate) unsafe fn write<T>(ptr: *mut T, what: &str, value: T) -> Result<(), Failure> {
+    non_null(ptr, what)?;
+    // SAFETY: non-null and writable, as the caller promises; `write` does not read
+    // or drop the old (possibly uninitialised) value.
+    unsafe { ptr.write(value) };
+    Ok(())
+}
+
+/// Reads a NUL-terminated string argument.
+///
+/// # Safety
+/// `ptr` is NULL or points to a NUL-terminated string valid for `'a`.
+pub(crate) unsafe fn c_str<'a>(ptr: *const c_char) -> Option<&'a CStr> {
+    // SAFETY: as the caller promises.
+    (!ptr.is_null()).then(|| unsafe { CStr::from_ptr(ptr) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn param_bits_follow_wire_params_fields() {
+        let ours = [
+            DYFOS_PARAM_ROVER_RADIUS,
+            DYFOS_PARAM_MARKER_SIZE,
+            DYFOS_PARAM_MARKER_HEIGHT,
+            DYFOS_PARAM_VIEWER_RADIUS,
+            DYFOS_PARAM_SAFETY_MARGIN,
+            DYFOS_PARAM_Z_MIN,
+            DYFOS_PARAM_Z_MAX,
+            DYFOS_PARAM_CAMERA_PITCH,
+            DYFOS_PARAM_T_VS,
+            DYFOS_PARAM_F_H,
+            DYFOS_PARAM_F_V,
+            DYFOS_PARAM_RHO_MIN,
+            DYFOS_PARAM_RHO_MAX,
+            DYFOS_PARAM_KAPPA,
+            DYFOS_PARAM_LAMBDA,
+            DYFOS_PARAM_PERIMETER_POINTS,
+            DYFOS_PARAM_MODEL,
+        ];
+        assert_eq!(ours.len(), WireParams::FIELDS.len());
+        for (bit, name) in ours.iter().zip(WireParams::FIELDS) {
+            assert_eq!(Some(*bit), WireParams::bit(name), "{name}");
+        }
+        assert_eq!(DYFOS_PARAMS_ALL_SET, WireParams::ALL_SET);
+    }
+
+    #[test]
+    fn params_round_trip_through_the_c_struct() {
+        let changed = Params { lambda: 2.5, rho_min: 1.5, ..Params::default() };
+        let all = dyfos_params::from_params(&changed, DYFOS_PARAMS_ALL_SET);
+        assert_eq!(all.to_params().unwrap(), changed);
+        // Bits clear: the defaults, whatever the fields hold.
+        assert_eq!(dyfos_params { kappa: f64::NAN, ..all }.with_set(0).to_params().unwrap(), Params::default());
+        let lambda_only = all.with_set(DYFOS_PARAM_LAMBDA);
+        assert_eq!(lambda_only.to_params().unwrap(), Params { lambda: 2.5, ..Params::default() });
+        let bad = dyfos_params { rho_min: 9.0, ..all };
+        assert_eq!(bad.to_params().unwrap_err().code, crate::status::DYFOS_STATUS_INVALID_PARAMS);
+        let bad_bits = all.with_set(1 << 17);
+        assert_eq!(bad_bits.to_params().unwrap_err().code, crate::status::DYFOS_STATUS_INVALID_PARAMS);
+    }
+
+    impl dyfos_params {
+        fn with_set(self, set: u32) -> Self {
+            dyfos_params { set, ..self }
+        }
+    }
+
+    #[test]
+    fn answers_round_trip_through_the_c_struct_bit_for_bit() {
+        let answer = Answer {
+            algorithm: Algorithm::Brute,
+            x: SensorState { rho: 3.25, psi: 0.1, phi: -2.0, yaw: 1.0e-9 },
+            cost: -7.123456789,
+            sensor_position: Point3::new(1.0, 2.0, 3.0),
+            sensor_orientation: UnitQuaternion::from_euler_angles(0.1, 0.2, 2.9),
+            viewer_position: Point3::new(1.5, 2.5, 3.5),
+            viewer_yaw: 2.9,
+            r: [[0.1, 0.01], [0.01, 0.2]],
+            posterior: Matrix3::new(0.1, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0, 0.0, 0.3),
+            evaluations: EvalStats { total: 10, workspace: 1, collision: 2, occlusion: 3 },
+            micros: 99,
+            map_version: 4,
+            stop: StopReason::Deadline,
+        };
+        let c = dyfos_answer::from(&answer);
+        assert_eq!(c.algorithm, DYFOS_ALGORITHM_BRUTE);
+        assert_eq!(c.stop, DYFOS_STOP_DEADLINE);
+        let back = c.decode().unwrap();
+        assert_eq!(back.to_json(), answer.to_json());
+        assert!(dyfos_answer { stop: 5, ..c }.decode().is_err());
+        assert!(dyfos_answer { algorithm: 5, ..c }.decode().is_err());
+    }
+
+    #[test]
+    fn a_default_request_needs_a_belief() {
+        let r = dyfos_rendezvous_request::defaults();
+        // SAFETY: no deltas pointer.
+        let err = unsafe { r.decode() }.unwrap_err();
+        assert_eq!(err.code, DYFOS_STATUS_INVALID_BELIEF);
+        let good = dyfos_rendezvous_request {
+            mean: [0.0, 0.0, 0.3],
+            cov: [[0.2, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.05]],
+            ..r
+        };
+        // SAFETY: no deltas pointer.
+        let request = unsafe { good.decode() }.unwrap();
+        assert_eq!(
+            (request.params, request.algorithm, request.expected_version),
+            (Params::default(), Algorithm::Dyfos, None)
+        );
+        let bad_algorithm = dyfos_rendezvous_request { algorithm: 5, ..good };
+        // SAFETY: no deltas pointer.
+        assert_eq!(unsafe { bad_algorithm.decode() }.unwrap_err().code, DYFOS_STATUS_INVALID_ALGORITHM);
+    }
+}

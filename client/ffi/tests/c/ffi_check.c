@@ -1,0 +1,315 @@
+/*
+ * ffi_check: exercises the whole C API against a real dyfosd; driven by
+ * client/ffi/tests/c_and_cpp.rs, which compares what it prints with `dyfos`.
+ *
+ * Usage: ffi_check SCENARIO.json PREFIX DOMAIN
+ *
+ * Every expectation that fails is printed to stderr and makes the exit code 1.
+ * stdout carries sections the driver reads, each starting with a line "--- NAME":
+ *   --- answer ALGORITHM SEED   the answer's JSON (dyfos_answer_to_json)
+ *   --- snapshot MAP            the snapshot JSON of the small map
+ *   --- kill                    the driver kills the daemon, then writes a line to stdin
+ *   --- done
+ */
+#include "dyfos.h"
+
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int failures = 0;
+
+static void expect_status(const char *what, int line, dyfos_status got, dyfos_status want) {
+  if (got != want) {
+    char message[1024];
+    dyfos_last_error(message, sizeof message);
+    fprintf(stderr, "ffi_check.c:%d: %s returned %u (%s), expected %u (%s): %s\n", line, what, got,
+            dyfos_status_name(got), want, dyfos_status_name(want), message);
+    failures++;
+  }
+}
+
+#define EXPECT(call, code) expect_status(#call, __LINE__, (call), (code))
+#define EXPECT_TRUE(cond)                                                 \
+  do {                                                                    \
+    if (!(cond)) {                                                        \
+      fprintf(stderr, "ffi_check.c:%d: expected %s\n", __LINE__, #cond); \
+      failures++;                                                         \
+    }                                                                     \
+  } while (0)
+
+static char *read_file(const char *path) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  fseek(f, 0, SEEK_END);
+  long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  char *text = malloc((size_t)n + 1);
+  if (text && fread(text, 1, (size_t)n, f) != (size_t)n) {
+    free(text);
+    text = NULL;
+  }
+  if (text) text[n] = '\0';
+  fclose(f);
+  return text;
+}
+
+/* Two answers equal in every field but the compute time. */
+static int same_answer(dyfos_answer a, dyfos_answer b) {
+  a.micros = 0;
+  b.micros = 0;
+  return memcmp(&a, &b, sizeof a) == 0;
+}
+
+static void print_answer(dyfos_client *client, const dyfos_rendezvous_request *request, const char *algorithm) {
+  dyfos_answer answer;
+  dyfos_status s = dyfos_client_rendezvous(client, request, &answer);
+  EXPECT(s, DYFOS_STATUS_OK);
+  if (s != DYFOS_STATUS_OK) return;
+  char *json = NULL;
+  EXPECT(dyfos_answer_to_json(&answer, &json), DYFOS_STATUS_OK);
+  printf("--- answer %s %llu\n%s\n", algorithm, (unsigned long long)request->seed, json);
+  dyfos_string_free(json);
+}
+
+int main(int argc, char **argv) {
+  if (argc != 4) {
+    fprintf(stderr, "usage: ffi_check SCENARIO.json PREFIX DOMAIN\n");
+    return 2;
+  }
+  char *scenario = read_file(argv[1]);
+  if (!scenario) {
+    fprintf(stderr, "cannot read %s\n", argv[1]);
+    return 2;
+  }
+  const char *prefix = argv[2], *domain = argv[3];
+
+  /* Connecting: bad arguments, no daemon, then the real one. */
+  dyfos_client *client = (dyfos_client *)1;
+  EXPECT(dyfos_client_connect(prefix, domain, 1000, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_connect("bad prefix", domain, 1000, &client), DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT_TRUE(client == NULL);
+  EXPECT(dyfos_client_connect(prefix, domain, 0, &client), DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT(dyfos_client_connect("dyfos-ffi-nobody/", domain, 50, &client), DYFOS_STATUS_NO_DAEMON);
+  EXPECT_TRUE(client == NULL);
+  EXPECT(dyfos_client_connect(prefix, domain, 60000, &client), DYFOS_STATUS_OK);
+  if (client == NULL) return 1;
+
+  /* Stats. */
+  char *stats = NULL;
+  EXPECT(dyfos_client_stats(client, &stats), DYFOS_STATUS_OK);
+  EXPECT_TRUE(stats != NULL && strstr(stats, "\"pid\":") != NULL && strstr(stats, "\"maps\":") != NULL);
+  dyfos_string_free(stats);
+
+  /* The scenario's map: uploaded once, then reused. */
+  uint64_t map = 0, version = 99, again = 0, version_again = 99;
+  EXPECT(dyfos_client_upload_scenario(client, scenario, &map, &version), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_upload_scenario(client, scenario, &again, &version_again), DYFOS_STATUS_OK);
+  EXPECT_TRUE(map == again && version == 0 && version_again == 0);
+  EXPECT(dyfos_client_upload_scenario(client, "{\"bounds\": [", &again, NULL), DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT(dyfos_client_upload_scenario(client, NULL, &again, NULL), DYFOS_STATUS_NULL_PARAMETER);
+
+  /* Answers, compared with `dyfos solve` by the driver. */
+  dyfos_rendezvous_request request;
+  EXPECT(dyfos_rendezvous_request_from_scenario(scenario, map, &request), DYFOS_STATUS_OK);
+  EXPECT_TRUE(request.params.set == DYFOS_PARAMS_ALL_SET && request.map == map);
+  request.seed = 7;
+  request.expected_version = version;
+  print_answer(client, &request, "dyfos");
+  request.algorithm = DYFOS_ALGORITHM_CENTER;
+  request.seed = 3;
+  print_answer(client, &request, "center");
+  request.algorithm = DYFOS_ALGORITHM_DYFOS_SCIPY;
+  request.seed = 0;
+  print_answer(client, &request, "dyfos-scipy");
+
+  /* Parameters left at their default (set = 0) equal the defaults given explicitly:
+   * the scenario's params are the defaults ({"model": "paper"}). */
+  dyfos_rendezvous_request defaulted;
+  EXPECT(dyfos_rendezvous_request_init(&defaulted), DYFOS_STATUS_OK);
+  EXPECT_TRUE(defaulted.params.set == 0 && defaulted.algorithm == DYFOS_ALGORITHM_DYFOS && defaulted.seed == 0 &&
+              defaulted.expected_version == DYFOS_ANY_VERSION && defaulted.deltas_json == NULL);
+  dyfos_params from_json;
+  EXPECT(dyfos_params_from_json("{}", &from_json), DYFOS_STATUS_OK);
+  EXPECT(dyfos_params_from_json("{\"rho_mim\": 2}", &from_json), DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT(dyfos_params_from_json("{}", &from_json), DYFOS_STATUS_OK);
+  defaulted.map = map;
+  memcpy(defaulted.mean, request.mean, sizeof request.mean);
+  memcpy(defaulted.cov, request.cov, sizeof request.cov);
+  dyfos_rendezvous_request explicit_defaults = defaulted;
+  explicit_defaults.params = from_json;
+  EXPECT_TRUE(explicit_defaults.params.set == DYFOS_PARAMS_ALL_SET);
+  /* Every field up to `set` (the struct's tail padding is not compared). */
+  EXPECT_TRUE(memcmp(&request.params, &from_json, offsetof(dyfos_params, set) + sizeof from_json.set) == 0);
+  dyfos_answer left_out, given, repeated;
+  EXPECT(dyfos_client_rendezvous(client, &defaulted, &left_out), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_rendezvous(client, &explicit_defaults, &given), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_rendezvous(client, &defaulted, &repeated), DYFOS_STATUS_OK);
+  EXPECT_TRUE(same_answer(left_out, given));
+  EXPECT_TRUE(same_answer(left_out, repeated));
+  EXPECT_TRUE(left_out.algorithm == DYFOS_ALGORITHM_DYFOS && left_out.map_version == version);
+  /* One parameter given changes the answer; the others stay at their default. */
+  dyfos_rendezvous_request one_param = defaulted;
+  one_param.params.rho_max = 4.0;
+  one_param.params.set = DYFOS_PARAM_RHO_MAX;
+  dyfos_answer changed;
+  EXPECT(dyfos_client_rendezvous(client, &one_param, &changed), DYFOS_STATUS_OK);
+  EXPECT_TRUE(!same_answer(left_out, changed) && changed.x[0] <= 4.0);
+
+  /* Check mode. */
+  uint64_t checked = 99;
+  EXPECT(dyfos_client_check(client, &request, &checked), DYFOS_STATUS_OK);
+  EXPECT_TRUE(checked == version);
+
+  /* Every error family. */
+  dyfos_answer answer;
+  dyfos_rendezvous_request bad = request;
+  bad.map = 424242;
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_UNKNOWN_MAP);
+  char message[512];
+  EXPECT_TRUE(dyfos_last_error(message, sizeof message) > 0 && strstr(message, "424242") != NULL);
+  bad = request;
+  bad.expected_version = version + 5;
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  EXPECT(dyfos_client_check(client, &bad, &checked), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  bad = request;
+  bad.cov[0][1] = 0.3; /* not symmetric */
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_BELIEF);
+  bad = request;
+  bad.algorithm = 9;
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_ALGORITHM);
+  bad = request;
+  bad.params.rho_min = 9.0; /* > rho_max */
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_PARAMS);
+  EXPECT_TRUE(dyfos_last_error(message, sizeof message) > 0 && strstr(message, "rho_min") != NULL);
+  bad = request;
+  bad.params.set = 1u << 20;
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_PARAMS);
+  bad = request;
+  bad.deadline_micros = 3600000001ull;
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_DEADLINE);
+  bad = request;
+  bad.algorithm = DYFOS_ALGORITHM_BRUTE;
+  bad.deadline_micros = 1; /* passes before a worker takes it */
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_DEADLINE_EXCEEDED);
+  bad = request;
+  bad.deltas_json = "[{\"RemoveObstacle\": {\"id\": 404}}]";
+  EXPECT(dyfos_client_check(client, &bad, &checked), DYFOS_STATUS_INVALID_DELTA);
+  bad.deltas_json = "[not json";
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_ARGUMENT);
+  {
+    /* More inline deltas than a request may carry: over capacity, refused before sending. */
+    size_t n = 1100;
+    char *many = malloc(n * 8 + 3);
+    strcpy(many, "[");
+    for (size_t i = 0; i < n; i++) strcat(many, i ? ",\"Clear\"" : "\"Clear\"");
+    strcat(many, "]");
+    bad.deltas_json = many;
+    EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_OVER_CAPACITY);
+    free(many);
+  }
+
+  /* A small map of our own: no pose is feasible in it. */
+  const double tiny[4] = {-0.2, -0.2, 0.2, 0.2};
+  uint64_t tiny_map = 777000 + (uint64_t)(map % 1000), tiny_version = 99;
+  EXPECT(dyfos_client_create_map(client, tiny_map, tiny, 0.7, 2.1, &tiny_version), DYFOS_STATUS_OK);
+  EXPECT_TRUE(tiny_version == 0);
+  EXPECT(dyfos_client_create_map(client, tiny_map, tiny, 0.7, 2.1, NULL), DYFOS_STATUS_MAP_EXISTS);
+  const double inverted[4] = {1.0, 1.0, -1.0, -1.0};
+  EXPECT(dyfos_client_create_map(client, tiny_map + 1, inverted, 0.7, 2.1, NULL), DYFOS_STATUS_INVALID_ARGUMENT);
+  bad = request;
+  bad.map = tiny_map;
+  bad.expected_version = DYFOS_ANY_VERSION;
+  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_NO_FEASIBLE_POSE);
+  uint64_t applied = 99;
+  EXPECT(dyfos_client_apply(client, tiny_map, "[{\"RemoveObstacle\": {\"id\": 5}}]", DYFOS_ANY_VERSION, &applied),
+         DYFOS_STATUS_INVALID_DELTA);
+  EXPECT(dyfos_client_apply(client, tiny_map, "[\"Clear\"]", 3, &applied), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  EXPECT(dyfos_client_apply(client, tiny_map, "{}", 0, &applied), DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT(dyfos_client_apply(client, 424242, "[\"Clear\"]", DYFOS_ANY_VERSION, &applied), DYFOS_STATUS_UNKNOWN_MAP);
+  EXPECT(dyfos_client_apply(client, tiny_map, "[\"Clear\"]", 0, &applied), DYFOS_STATUS_OK);
+  EXPECT_TRUE(applied == 1);
+  char *snapshot = NULL;
+  EXPECT(dyfos_client_snapshot(client, tiny_map, &snapshot), DYFOS_STATUS_OK);
+  if (snapshot) printf("--- snapshot %llu\n%s\n", (unsigned long long)tiny_map, snapshot);
+  dyfos_string_free(snapshot);
+  snapshot = NULL;
+  EXPECT(dyfos_client_snapshot(client, 424242, &snapshot), DYFOS_STATUS_UNKNOWN_MAP);
+  EXPECT_TRUE(snapshot == NULL);
+
+  /* A reply later than the handle's timeout. */
+  dyfos_client *hasty = NULL;
+  EXPECT(dyfos_client_connect(prefix, domain, 1, &hasty), DYFOS_STATUS_OK);
+  bad = request;
+  bad.algorithm = DYFOS_ALGORITHM_BRUTE;
+  bad.deadline_micros = 2000000;
+  EXPECT(dyfos_client_rendezvous(hasty, &bad, &answer), DYFOS_STATUS_TIMEOUT);
+  EXPECT(dyfos_client_free(hasty), DYFOS_STATUS_OK);
+
+  /* NULL and freed handles, NULL inputs and outputs: the null-parameter code. */
+  char *out = NULL;
+  EXPECT(dyfos_client_stats(NULL, &out), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_stats(hasty, &out), DYFOS_STATUS_NULL_PARAMETER); /* freed above */
+  EXPECT(dyfos_client_free(hasty), DYFOS_STATUS_NULL_PARAMETER);        /* double free, detected */
+  EXPECT(dyfos_client_free(NULL), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_stats(client, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_rendezvous(NULL, &request, &answer), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_rendezvous(client, NULL, &answer), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_rendezvous(client, &request, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_check(client, &request, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_check(NULL, &request, &checked), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_upload_scenario(client, scenario, NULL, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_upload_scenario(NULL, scenario, &again, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_create_map(NULL, 5, tiny, 0.7, 2.1, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_create_map(client, 5, NULL, 0.7, 2.1, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_apply(NULL, tiny_map, "[]", DYFOS_ANY_VERSION, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_apply(client, tiny_map, NULL, DYFOS_ANY_VERSION, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_snapshot(NULL, tiny_map, &out), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_snapshot(client, tiny_map, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_answer_to_json(NULL, &out), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_answer_to_json(&left_out, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_rendezvous_request_init(NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_rendezvous_request_from_scenario(scenario, map, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_params_init(NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_params_from_json(NULL, &from_json), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT_TRUE(out == NULL);
+  dyfos_string_free(NULL);
+  /* A made-up handle is refused, not dereferenced. */
+  EXPECT(dyfos_client_stats((dyfos_client *)0x1234560, &out), DYFOS_STATUS_NULL_PARAMETER);
+  /* An answer with codes the library never writes. */
+  dyfos_answer forged = left_out;
+  forged.stop = 42;
+  EXPECT(dyfos_answer_to_json(&forged, &out), DYFOS_STATUS_INVALID_ARGUMENT);
+
+  /* The last error: its full length, and truncation to the buffer. */
+  EXPECT(dyfos_client_rendezvous(client, NULL, &answer), DYFOS_STATUS_NULL_PARAMETER);
+  size_t full = dyfos_last_error(NULL, 0);
+  char small[8];
+  EXPECT_TRUE(full > sizeof small && dyfos_last_error(small, sizeof small) == full && strlen(small) < sizeof small);
+  EXPECT_TRUE(strcmp(dyfos_status_name(DYFOS_STATUS_UNKNOWN_MAP), "unknown_map") == 0);
+  EXPECT_TRUE(strcmp(dyfos_status_name(DYFOS_STATUS_NULL_PARAMETER), "null_parameter") == 0);
+  EXPECT_TRUE(strcmp(dyfos_status_name(12345), "unknown_status") == 0);
+  EXPECT(dyfos_client_stats(client, &out), DYFOS_STATUS_OK);
+  EXPECT_TRUE(dyfos_last_error(NULL, 0) == 0); /* a success clears it */
+  dyfos_string_free(out);
+
+  /* The daemon goes away: the handle says so, and nothing crashes. */
+  printf("--- kill\n");
+  fflush(stdout);
+  char line[16];
+  if (!fgets(line, sizeof line, stdin)) {
+    fprintf(stderr, "the driver did not answer --- kill\n");
+    failures++;
+  }
+  out = NULL;
+  dyfos_status gone = dyfos_client_stats(client, &out);
+  EXPECT_TRUE(gone == DYFOS_STATUS_DAEMON_GONE || gone == DYFOS_STATUS_NO_DAEMON);
+  EXPECT_TRUE(out == NULL);
+  EXPECT(dyfos_client_free(client), DYFOS_STATUS_OK);
+
+  printf("--- done\n");
+  free(scenario);
+  if (failures) fprintf(stderr, "%d expectation(s) failed\n", failures);
+  return failures ? 1 : 0;
+}
