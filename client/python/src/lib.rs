@@ -168,8 +168,9 @@ struct RequestArgs<'a> {
 impl RequestArgs<'_> {
     /// The validated request; errors carry the status the daemon would give.
     fn request(&self) -> Result<RendezvousRequest, ErrorInfo> {
-        let belief = Belief::new(self.mean, self.cov)
-            .map_err(|e| ErrorInfo::new("invalid_belief", format!("belief: {e}; pass a finite mean and an SPD 3×3 covariance")))?;
+        let belief = Belief::new(self.mean, self.cov).map_err(|e| {
+            ErrorInfo::new("invalid_belief", format!("belief: {e}; pass a finite mean and an SPD 3×3 covariance"))
+        })?;
         let algorithm = Algorithm::from_name(self.algorithm).ok_or_else(|| {
             ErrorInfo::new(
                 "invalid_algorithm",
@@ -178,8 +179,9 @@ impl RequestArgs<'_> {
         })?;
         let params = match self.params {
             None => Params::default(),
-            Some(json) => dyfos_shared::scenario::params_from_json(json)
-                .map_err(|e| ErrorInfo::new("invalid_params", e))?,
+            Some(json) => {
+                dyfos_shared::scenario::params_from_json(json).map_err(|e| ErrorInfo::new("invalid_params", e))?
+            }
         };
         let deltas = match self.deltas {
             None => Vec::new(),
@@ -272,9 +274,16 @@ impl PyClient {
     /// `connect_timeout` seconds for it; `timeout` is every call's default limit.
     #[new]
     #[pyo3(signature = (prefix, domain, timeout, connect_timeout))]
-    fn new(py: Python<'_>, prefix: String, domain: Option<String>, timeout: f64, connect_timeout: f64) -> PyResult<Self> {
-        let (timeout, connect_timeout) = (|| Ok((seconds("timeout", timeout)?, seconds("connect_timeout", connect_timeout)?)))()
-            .map_err(|e| to_pyerr(py, e))?;
+    fn new(
+        py: Python<'_>,
+        prefix: String,
+        domain: Option<String>,
+        timeout: f64,
+        connect_timeout: f64,
+    ) -> PyResult<Self> {
+        let (timeout, connect_timeout) =
+            (|| Ok((seconds("timeout", timeout)?, seconds("connect_timeout", connect_timeout)?)))()
+                .map_err(|e| to_pyerr(py, e))?;
         let config = ClientConfig { prefix, domain, connect_timeout, ..ClientConfig::default() };
         let client = py.detach(|| Client::connect(&config)).map_err(|e| to_pyerr(py, e.into()))?;
         Ok(PyClient { client: Mutex::new(Some(client)), timeout })
@@ -357,7 +366,13 @@ impl PyClient {
 
     /// Deletes the map.
     #[pyo3(signature = (map_id, expected_version=None, timeout=None))]
-    fn delete_map(&self, py: Python<'_>, map_id: u64, expected_version: Option<u64>, timeout: Option<f64>) -> PyResult<()> {
+    fn delete_map(
+        &self,
+        py: Python<'_>,
+        map_id: u64,
+        expected_version: Option<u64>,
+        timeout: Option<f64>,
+    ) -> PyResult<()> {
         self.call(py, timeout, |c, t| c.delete_map(map_id, expected_version, t))
     }
 
@@ -379,7 +394,8 @@ impl PyClient {
         deltas: Option<&str>,
         timeout: Option<f64>,
     ) -> PyResult<PyAnswer> {
-        let args = RequestArgs { map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas };
+        let args =
+            RequestArgs { map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas };
         let request = args.request().map_err(|e| to_pyerr(py, e))?;
         self.call(py, timeout, |c, t| c.rendezvous(&request, t)).map(PyAnswer)
     }
@@ -403,7 +419,8 @@ impl PyClient {
         deltas: Option<&str>,
         timeout: Option<f64>,
     ) -> PyResult<u64> {
-        let args = RequestArgs { map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas };
+        let args =
+            RequestArgs { map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas };
         let request = args.request().map_err(|e| to_pyerr(py, e))?;
         self.call(py, timeout, |c, t| c.check(&request, t)).map(|c| c.map_version)
     }
