@@ -58,7 +58,7 @@ from __future__ import annotations
 import datetime as _dt
 import json as _json
 import os as _os
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
 
 from . import _dyfos
 
@@ -167,7 +167,7 @@ class DyfosTimeoutError(DyfosError, TimeoutError):
     request a shorter ``deadline`` or ``budget``."""
 
 
-_FAMILIES: Dict[str, type] = {
+_FAMILIES: Dict[str, Type[DyfosError]] = {
     "unknown_map": UnknownMapError,
     "map_version_mismatch": MapVersionMismatchError,
     "no_feasible_pose": NoFeasiblePoseError,
@@ -287,7 +287,10 @@ def read_scenario(scenario: ScenarioLike) -> Dict[str, Any]:
     """A scenario (path, JSON text or dict) as a dict, e.g. to query its ``rover`` belief
     with its ``params``: ``client.rendezvous(map_id, s["rover"]["mean"], s["rover"]["cov"],
     params=s.get("params"))``. Not validated here; the client validates it when used."""
-    return _json.loads(_scenario_json(scenario))
+    value = _json.loads(_scenario_json(scenario))
+    if not isinstance(value, dict):
+        raise InvalidRequestError("invalid_scenario", f"a scenario is a JSON object, not {type(value).__name__}")
+    return value
 
 
 class Answer:
@@ -404,7 +407,8 @@ class Client:
         connect_timeout: Optional[Seconds] = None,
     ) -> None:
         t = _seconds(timeout, "timeout")
-        assert t is not None
+        if t is None:
+            raise _invalid("timeout must be seconds (a number or a datetime.timedelta), not None")
         ct = _seconds(connect_timeout, "connect_timeout")
         self.prefix = prefix
         self.domain = domain
