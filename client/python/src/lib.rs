@@ -151,6 +151,21 @@ fn seconds(name: &str, s: f64) -> Result<Duration, ErrorInfo> {
         .map_err(|_| ErrorInfo::new("malformed_request", format!("{name} = {s} s must be a finite number ≥ 0")))
 }
 
+/// A belief's mean and covariance from any Python sequences of numbers (lists,
+/// tuples, numpy arrays and their rows), read straight into floats.
+fn belief_numbers(mean: &Bound<'_, PyAny>, cov: &Bound<'_, PyAny>) -> Result<([f64; 3], [[f64; 3]; 3]), ErrorInfo> {
+    let mean = mean.extract::<[f64; 3]>().map_err(|e| {
+        ErrorInfo::new("malformed_request", format!("mean must be 3 numbers [x, y, θ] (a list or numpy array): {e}"))
+    })?;
+    let cov = cov.extract::<[[f64; 3]; 3]>().map_err(|e| {
+        ErrorInfo::new(
+            "malformed_request",
+            format!("cov must be a 3×3 matrix (3 rows of 3 numbers, or a numpy array): {e}"),
+        )
+    })?;
+    Ok((mean, cov))
+}
+
 /// The parts of a rendezvous request, as the Python layer passes them.
 struct RequestArgs<'a> {
     map_id: u64,
@@ -227,6 +242,93 @@ impl PyAnswer {
     /// The answer as the JSON text `dyfos solve` prints (one line).
     fn to_json(&self) -> String {
         self.0.to_json().to_string()
+    }
+
+    /// The search algorithm used.
+    #[getter]
+    fn algorithm(&self) -> &'static str {
+        self.0.algorithm.name()
+    }
+
+    /// The sensor state x = [ρ, ψ, φ, ψ_v].
+    #[getter]
+    fn x(&self) -> [f64; 4] {
+        self.0.x.to_array()
+    }
+
+    /// E = ln det Σ⁺.
+    #[getter]
+    fn cost(&self) -> f64 {
+        self.0.cost
+    }
+
+    /// The predicted measurement noise R, 2×2.
+    #[getter(R)]
+    fn r(&self) -> [[f64; 2]; 2] {
+        self.0.r
+    }
+
+    /// The predicted posterior Σ⁺, 3×3 rows.
+    #[getter]
+    fn posterior(&self) -> [[f64; 3]; 3] {
+        dyfos_shared::math::rows3(&self.0.posterior)
+    }
+
+    /// The sensor's position [x, y, z].
+    #[getter]
+    fn sensor_position(&self) -> [f64; 3] {
+        self.0.sensor_position.coords.into()
+    }
+
+    /// The sensor's orientation [x, y, z, w], as `dyfos solve` prints it.
+    #[getter]
+    fn sensor_quaternion(&self) -> [f64; 4] {
+        dyfos_shared::math::canonical_xyzw(&self.0.sensor_orientation)
+    }
+
+    /// The viewer's position [x, y, z].
+    #[getter]
+    fn viewer_position(&self) -> [f64; 3] {
+        self.0.viewer_position.coords.into()
+    }
+
+    /// The viewer's yaw ψ_v.
+    #[getter]
+    fn viewer_yaw(&self) -> f64 {
+        self.0.viewer_yaw
+    }
+
+    /// Candidates evaluated: {total, workspace, collision, occlusion}.
+    #[getter]
+    fn evaluations<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let e = self.0.evaluations;
+        let dict = PyDict::new(py);
+        dict.set_item("total", e.total)?;
+        dict.set_item("workspace", e.workspace)?;
+        dict.set_item("collision", e.collision)?;
+        dict.set_item("occlusion", e.occlusion)?;
+        Ok(dict)
+    }
+
+    /// The map version searched.
+    #[getter]
+    fn map_version(&self) -> u64 {
+        self.0.map_version
+    }
+
+    /// Why the search stopped, by its JSON name (`finished`, `deadline`, ...).
+    #[getter]
+    fn stop(&self) -> String {
+        match serde_json::to_value(self.0.stop) {
+            Ok(serde_json::Value::String(name)) => name,
+            _ => format!("{:?}", self.0.stop),
+        }
+    }
+
+    /// The search's compute time, µs.
+    #[getter]
+    fn micros(&self) -> u64 {
+        self.0.micros
     }
 }
 
@@ -383,8 +485,8 @@ impl PyClient {
         &self,
         py: Python<'_>,
         map_id: u64,
-        mean: [f64; 3],
-        cov: [[f64; 3]; 3],
+        mean: &Bound<'_, PyAny>,
+        cov: &Bound<'_, PyAny>,
         algorithm: &str,
         seed: u64,
         params: Option<&str>,
@@ -394,6 +496,7 @@ impl PyClient {
         deltas: Option<&str>,
         timeout: Option<f64>,
     ) -> PyResult<PyAnswer> {
+        let (mean, cov) = belief_numbers(mean, cov).map_err(|e| to_pyerr(py, e))?;
         let args =
             RequestArgs { map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas };
         let request = args.request().map_err(|e| to_pyerr(py, e))?;
@@ -408,8 +511,8 @@ impl PyClient {
         &self,
         py: Python<'_>,
         map_id: u64,
-        mean: [f64; 3],
-        cov: [[f64; 3]; 3],
+        mean: &Bound<'_, PyAny>,
+        cov: &Bound<'_, PyAny>,
         algorithm: &str,
         seed: u64,
         params: Option<&str>,
@@ -419,6 +522,7 @@ impl PyClient {
         deltas: Option<&str>,
         timeout: Option<f64>,
     ) -> PyResult<u64> {
+        let (mean, cov) = belief_numbers(mean, cov).map_err(|e| to_pyerr(py, e))?;
         let args =
             RequestArgs { map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas };
         let request = args.request().map_err(|e| to_pyerr(py, e))?;

@@ -223,19 +223,6 @@ def _floats(value: Vector, n: int, name: str) -> List[float]:
     return out
 
 
-def _matrix3(value: Matrix, name: str) -> List[List[float]]:
-    """A 3×3 matrix (nested sequences or a numpy array) as nested lists of floats."""
-    if hasattr(value, "tolist"):
-        value = value.tolist()
-    try:
-        rows = list(value)
-    except TypeError:
-        raise _invalid(f"{name} must be a 3×3 matrix (3 rows of 3 numbers)") from None
-    if len(rows) != 3:
-        raise _invalid(f"{name} has {len(rows)} rows; it needs 3 rows of 3 numbers")
-    return [_floats(r, 3, f"{name}[{i}]") for i, r in enumerate(rows)]
-
-
 def _seconds(value: Optional[Seconds], name: str) -> Optional[float]:
     if value is None:
         return None
@@ -346,21 +333,20 @@ class Answer:
     micros: int
 
     def __init__(self, raw: "_dyfos.RawAnswer") -> None:
-        d = raw.to_dict()
         self._raw = raw
-        self.algorithm = d["algorithm"]
-        self.x = d["x"]
-        self.cost = d["cost"]
-        self.R = d["R"]
-        self.posterior = d["posterior"]
-        self.sensor_position = d["sensor_position"]
-        self.sensor_quaternion = d["sensor_quaternion"]
-        self.viewer_position = d["viewer_position"]
-        self.viewer_yaw = d["viewer_yaw"]
-        self.evaluations = d["evaluations"]
-        self.map_version = d["map_version"]
-        self.stop = d["stop"]
-        self.micros = d["micros"]
+        self.algorithm = raw.algorithm
+        self.x = raw.x
+        self.cost = raw.cost
+        self.R = raw.R
+        self.posterior = raw.posterior
+        self.sensor_position = raw.sensor_position
+        self.sensor_quaternion = raw.sensor_quaternion
+        self.viewer_position = raw.viewer_position
+        self.viewer_yaw = raw.viewer_yaw
+        self.evaluations = raw.evaluations
+        self.map_version = raw.map_version
+        self.stop = raw.stop
+        self.micros = raw.micros
 
     def to_dict(self) -> Dict[str, Any]:
         """The answer as ``json.loads`` of ``dyfos solve``'s output: the same keys, and
@@ -515,17 +501,13 @@ class Client:
 
     def _request(
         self,
-        mean: Vector,
-        cov: Matrix,
         params: Optional[Mapping[str, Any]],
         deadline: Optional[Seconds],
         deltas: Optional[DeltasLike],
-    ) -> Tuple[List[float], List[List[float]], Optional[str], Optional[float], Optional[str]]:
+    ) -> Tuple[Optional[str], Optional[float], Optional[str]]:
         return (
-            _floats(mean, 3, "mean"),
-            _matrix3(cov, "cov"),
             None if params is None else _json.dumps(dict(params)),
-            _seconds(deadline, "deadline"),
+            None if deadline is None else _seconds(deadline, "deadline"),
             None if deltas is None else _deltas_json(deltas),
         )
 
@@ -567,9 +549,9 @@ class Client:
             NoFeasiblePoseError, DeadlineExceededError, BusyError, DaemonGoneError,
             DyfosTimeoutError: see the module's table.
         """
-        m, c, p, d, ds = self._request(mean, cov, params, deadline, deltas)
+        p, d, ds = self._request(params, deadline, deltas)
         raw = self._raw.rendezvous(
-            map_id, m, c, algorithm, seed, p, budget, d, expected_version, ds, _seconds(timeout, "timeout")
+            map_id, mean, cov, algorithm, seed, p, budget, d, expected_version, ds, None if timeout is None else _seconds(timeout, "timeout")
         )
         return Answer(raw)
 
@@ -591,7 +573,7 @@ class Client:
         everything (map id and version, belief, parameters, inline deltas on a copy of
         the map) and answers at once without searching or changing the map. Returns
         the map version the query would search. Raises as :meth:`rendezvous`."""
-        m, c, p, d, ds = self._request(mean, cov, params, deadline, deltas)
+        p, d, ds = self._request(params, deadline, deltas)
         return self._raw.check(
-            map_id, m, c, algorithm, seed, p, budget, d, expected_version, ds, _seconds(timeout, "timeout")
+            map_id, mean, cov, algorithm, seed, p, budget, d, expected_version, ds, None if timeout is None else _seconds(timeout, "timeout")
         )

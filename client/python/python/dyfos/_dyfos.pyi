@@ -12,6 +12,32 @@ class RawAnswer:
 
     def to_dict(self) -> Dict[str, Any]: ...
     def to_json(self) -> str: ...
+    @property
+    def algorithm(self) -> str: ...
+    @property
+    def x(self) -> List[float]: ...
+    @property
+    def cost(self) -> float: ...
+    @property
+    def R(self) -> List[List[float]]: ...
+    @property
+    def posterior(self) -> List[List[float]]: ...
+    @property
+    def sensor_position(self) -> List[float]: ...
+    @property
+    def sensor_quaternion(self) -> List[float]: ...
+    @property
+    def viewer_position(self) -> List[float]: ...
+    @property
+    def viewer_yaw(self) -> float: ...
+    @property
+    def evaluations(self) -> Dict[str, int]: ...
+    @property
+    def map_version(self) -> int: ...
+    @property
+    def stop(self) -> str: ...
+    @property
+    def micros(self) -> int: ...
 
 class RawClient:
     """``dyfos_client::Client`` behind a mutex; every call releases the GIL while it waits."""
@@ -35,8 +61,8 @@ class RawClient:
     def rendezvous(
         self,
         map_id: int,
-        mean: Sequence[float],
-        cov: Sequence[Sequence[float]],
+        mean: Any,
+        cov: Any,
         algorithm: str,
         seed: int,
         params: Optional[str],
@@ -49,8 +75,8 @@ class RawClient:
     def check(
         self,
         map_id: int,
-        mean: Sequence[float],
-        cov: Sequence[Sequence[float]],
+        mean: Any,
+        cov: Any,
         algorithm: str,
         seed: int,
         params: Optional[str],
