@@ -20,30 +20,30 @@ Errors are exceptions: :class:`DyfosError` carries ``.status`` (the daemon's wir
 name, e.g. ``"map_version_mismatch"``) and ``.detail`` (its sentence saying what to
 change); its subclasses are the families a caller handles differently:
 
-=============================  =====================================================
-exception                      ``status``
-=============================  =====================================================
-:class:`UnknownMapError`       ``unknown_map``
-:class:`MapVersionMismatchError` ``map_version_mismatch``
-:class:`InvalidRequestError`   ``malformed_request``, ``invalid_algorithm``,
-                               ``invalid_belief``, ``invalid_params``,
-                               ``unsupported_model``, ``invalid_deadline``,
-                               ``malformed_delta``, ``invalid_delta``, ``map_exists``,
-                               ``chunk_out_of_order``, ``chunk_duplicate``,
-                               ``chunk_incomplete``, ``invalid_scenario``,
-                               ``invalid_prefix``, ``invalid_domain`` (also a
-                               :class:`ValueError`)
-:class:`NoFeasiblePoseError`   ``no_feasible_pose``
-:class:`DeadlineExceededError` ``deadline_exceeded``
-:class:`BusyError`             ``busy``, ``over_capacity``, ``shutting_down``
-:class:`DaemonGoneError`       ``no_daemon``, ``daemon_gone`` (also a
-                               :class:`ConnectionError`)
-:class:`DyfosTimeoutError`     ``timeout``: no reply within the call's timeout (also a
-                               :class:`TimeoutError`)
-:class:`DyfosError`            anything else: ``storage_failed``, ``internal_error``,
-                               ``incompatible_daemon``, ``ipc_error``,
-                               ``client_closed``
-=============================  =====================================================
+=================================  =========================================================
+exception                          ``status``
+=================================  =========================================================
+:class:`UnknownMapError`           ``unknown_map``
+:class:`MapVersionMismatchError`   ``map_version_mismatch``
+:class:`InvalidRequestError`       ``malformed_request``, ``invalid_algorithm``,
+                                   ``invalid_belief``, ``invalid_params``,
+                                   ``unsupported_model``, ``invalid_deadline``,
+                                   ``malformed_delta``, ``invalid_delta``, ``map_exists``,
+                                   ``chunk_out_of_order``, ``chunk_duplicate``,
+                                   ``chunk_incomplete``, ``invalid_scenario``,
+                                   ``invalid_prefix``, ``invalid_domain`` (also a
+                                   :class:`ValueError`)
+:class:`NoFeasiblePoseError`       ``no_feasible_pose``
+:class:`DeadlineExceededError`     ``deadline_exceeded``
+:class:`BusyError`                 ``busy``, ``over_capacity``, ``shutting_down``
+:class:`DaemonGoneError`           ``no_daemon``, ``daemon_gone`` (also a
+                                   :class:`ConnectionError`)
+:class:`DyfosTimeoutError`         ``timeout``: no reply within the call's timeout (also a
+                                   :class:`TimeoutError`)
+:class:`DyfosError`                anything else: ``storage_failed``, ``internal_error``,
+                                   ``incompatible_daemon``, ``ipc_error``,
+                                   ``client_closed``
+=================================  =========================================================
 
 ``.retryable`` says whether sending the same request again may succeed (the daemon
 was missing, restarting or busy); the client reconnects by itself.
