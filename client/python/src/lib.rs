@@ -393,8 +393,9 @@ impl PyClient {
 
     /// Closes the connection (idempotent); later calls raise `client_closed`.
     fn close(&self, py: Python<'_>) {
-        let client = py.detach(|| self.lock().take());
-        drop(client);
+        // Waits for a call in flight on another thread; closing the ports happens
+        // without the GIL too.
+        py.detach(|| drop(self.lock().take()));
     }
 
     /// Whether [`PyClient::close`] was called.
