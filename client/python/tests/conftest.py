@@ -153,6 +153,14 @@ def dyfos_cli(*args: str) -> Dict[str, Any]:
     return json.loads(out.stdout)
 
 
+def slow_scenario() -> Dict[str, Any]:
+    """A scenario whose ``brute`` search takes seconds (about 10 s on 2 cores, release
+    or debug build): 4096 perimeter points per occlusion test instead of 8."""
+    s = json.loads((DATA / "anisotropic-mirror-basin.json").read_text())
+    s["params"] = {"perimeter_points": 4096}
+    return s
+
+
 def write_json(tmp_path: Path, name: str, value: Any) -> Path:
     path = tmp_path / name
     path.write_text(json.dumps(value))

@@ -11,7 +11,7 @@ from typing import Any, Dict
 import pytest
 
 import dyfos
-from conftest import DATA, dyfos_cli, write_json
+from conftest import DATA, dyfos_cli, slow_scenario, write_json
 
 EXAMPLE = DATA / "example.json"
 BASIN = DATA / "anisotropic-mirror-basin.json"
@@ -214,8 +214,7 @@ def test_one_client_shared_by_threads(daemon: Any) -> None:
 def test_the_gil_is_released_while_a_query_waits(daemon: Any, tmp_path: Path) -> None:
     """While one thread waits in a long query, another runs Python and sees the daemon
     searching it: impossible if the waiting thread held the GIL."""
-    scenario = dyfos.read_scenario(BASIN)
-    scenario["params"] = {"perimeter_points": 1024}
+    scenario = slow_scenario()
     slow = write_json(tmp_path, "slow.json", scenario)
     mean, cov = scenario["rover"]["mean"], scenario["rover"]["cov"]
     with daemon.client() as waiting, daemon.client() as watcher:

@@ -11,7 +11,7 @@ from typing import Any, Dict, List, Type
 import pytest
 
 import dyfos
-from conftest import DATA, PATIENCE, write_json
+from conftest import DATA, PATIENCE, slow_scenario, write_json
 
 EXAMPLE = DATA / "example.json"
 MEAN = [0.0, 0.0, 0.3]
@@ -28,13 +28,6 @@ def raises(family: Type[dyfos.DyfosError], status: str, call: Any, *args: Any, *
     assert isinstance(e.detail, str) and len(e.detail) > 10, e.detail
     assert str(e) == f"{status}: {e.detail}"
     return e
-
-
-def slow_scenario(tmp_path: Path) -> Dict[str, Any]:
-    """A scenario whose `brute` search takes far longer than any test waits."""
-    s = dyfos.read_scenario(DATA / "anisotropic-mirror-basin.json")
-    s["params"] = {"perimeter_points": 1024}
-    return s
 
 
 def infeasible_map(client: dyfos.Client, map_id: int) -> None:
@@ -139,7 +132,7 @@ def test_over_capacity(client: dyfos.Client) -> None:
 
 
 def test_local_timeout(client: dyfos.Client, tmp_path: Path) -> None:
-    s = slow_scenario(tmp_path)
+    s = slow_scenario()
     map_id = client.upload_scenario(s)
     e = raises(
         dyfos.DyfosTimeoutError,
@@ -189,7 +182,7 @@ def test_busy_shutting_down_and_daemon_gone(own_daemon: Any, tmp_path: Path) -> 
     told to stop refuses new work `shutting_down`; one killed mid-query leaves its
     client `daemon_gone`."""
     d = own_daemon("--workers", "1", "--max-queued", "1")
-    s = slow_scenario(tmp_path)
+    s = slow_scenario()
     mean, cov, params = s["rover"]["mean"], s["rover"]["cov"], s["params"]
     with d.client() as c:
         map_id = c.upload_scenario(s)

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import dyfos
-from conftest import DATA, PATIENCE, dyfos_cli, write_json
+from conftest import DATA, PATIENCE, dyfos_cli, slow_scenario, write_json
 
 CHILD = """
 import json, sys
@@ -26,8 +26,7 @@ with dyfos.Client(prefix=prefix, domain=domain, timeout=600) as c:
 
 
 def test_client_killed_mid_query_disturbs_no_one(daemon: Any, tmp_path: Path) -> None:
-    s = dyfos.read_scenario(DATA / "anisotropic-mirror-basin.json")
-    s["params"] = {"perimeter_points": 1024}  # a `brute` search of minutes
+    s = slow_scenario()
     slow = write_json(tmp_path, "slow.json", s)
     example = DATA / "example.json"
     expected = dyfos_cli("solve", str(example), "--seed", "1")
@@ -58,20 +57,26 @@ def test_client_killed_mid_query_disturbs_no_one(daemon: Any, tmp_path: Path) ->
             got = other.rendezvous(map_id, e["rover"]["mean"], e["rover"]["cov"], seed=1, params=e["params"]).to_dict()
             del got["micros"]
             assert json.dumps(got) == json.dumps(expected)
+        # A long wait of its own: a waiting client also clears dead processes' iceoryx2
+        # resources (every 200 ms), so the daemon sees the killed client's request go
+        # without waiting for its own 5 s sweep.
+        slow_id = other.upload_scenario(s)
+        answer = other.rendezvous(slow_id, s["rover"]["mean"], s["rover"]["cov"], algorithm="brute", params=s["params"], deadline=1.0)
+        assert answer.stop == "deadline"
         # The daemon notices the dead client, abandons its search and frees the worker
         # (no reply to send). Its counters move one after the other: wait for both.
         def abandoned() -> bool:
             now = other.stats()
             return now["running"] == 0 and now["queries_abandoned"] > before["queries_abandoned"]
 
-        wait_until(abandoned)
+        wait_until(abandoned, other.stats)
         after = other.stats()
         assert after["pid"] == before["pid"], "the same daemon, still serving"
         assert daemon.alive()
 
 
-def wait_until(condition: Any) -> None:
+def wait_until(condition: Any, show: Any = None) -> None:
     deadline = time.monotonic() + PATIENCE
     while not condition():
-        assert time.monotonic() < deadline, "timed out waiting"
+        assert time.monotonic() < deadline, f"timed out waiting; {show() if show else ''}"
         time.sleep(0.01)
