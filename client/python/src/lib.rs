@@ -1,9 +1,9 @@
 //! `dyfos._dyfos`: the private extension module behind `import dyfos`.
 //!
 //! It wraps the one Rust client, [`dyfos_client::Client`]; the public API, its
-//! exceptions and docs are the pure-Python package `dyfos` (`python/dyfos/`), which
-//! converts Python values (lists, numpy arrays, dicts) to the plain numbers and
-//! JSON text taken here. Dicts cross as JSON text and are read with the same
+//! exceptions and docs are the pure-Python package `dyfos` (`python/dyfos/`). A
+//! belief's mean and covariance are read here straight from any sequence or numpy
+//! array; dicts cross as JSON text and are read with the same
 //! functions the `dyfos` command line uses (`params_from_json`, `Scenario::from_json`,
 //! serde for map deltas), so Python and Rust cannot disagree on a format.
 //!
