@@ -1,0 +1,167 @@
+"""Fixtures: a real ``dyfosd`` per test session (own prefix, iceoryx2 domain and state
+directory), killed at the end, and the ``dyfos`` command line for reference answers.
+
+``DYFOSD`` and ``DYFOS`` name the binaries (``test.sh`` points them at
+``target/debug``); ``DYFOS_TEST_DATA`` the repository's ``tests/data``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Dict, Iterator, List, Optional
+
+import pytest
+
+import dyfos
+
+ROOT = Path(__file__).resolve().parents[3]
+#: How long any wait in these tests may take before the test fails.
+PATIENCE = 30.0
+
+_counter = itertools.count()
+
+
+def _binary(var: str, name: str) -> str:
+    path = os.environ.get(var) or str(ROOT / "target" / "debug" / name)
+    if not os.access(path, os.X_OK):
+        pytest.exit(f"{path} is missing: run `cargo build --workspace --bins` or set {var}", returncode=2)
+    return path
+
+
+DYFOSD = _binary("DYFOSD", "dyfosd")
+DYFOS = _binary("DYFOS", "dyfos")
+DATA = Path(os.environ.get("DYFOS_TEST_DATA") or ROOT / "tests" / "data")
+
+
+class Daemon:
+    """One ``dyfosd`` with its own prefix, domain and state directory."""
+
+    def __init__(self, name: str, *extra: str) -> None:
+        n = next(_counter)
+        pid = os.getpid()
+        self.prefix = f"py-{name}-{pid}-{n}/"
+        self.domain = f"dyp{pid}_{n}_"
+        self.state_dir = tempfile.mkdtemp(prefix=f"dyfos-py-{name}-")
+        self.log_path = Path(self.state_dir + ".log")
+        self._log = open(self.log_path, "wb")
+        self.process = subprocess.Popen(
+            [DYFOSD, "--prefix", self.prefix, "--domain", self.domain, "--state-dir", self.state_dir, *extra],
+            stdout=subprocess.DEVNULL,
+            stderr=self._log,
+            env={**os.environ, "RUST_LOG": "info"},
+        )
+        deadline = time.monotonic() + PATIENCE
+        while True:
+            if self.process.poll() is not None:
+                raise RuntimeError(f"dyfosd exited at start:\n{self.log()}")
+            try:
+                with self.client(connect_timeout=0.05) as c:
+                    c.stats()
+                break
+            except dyfos.DaemonGoneError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.01)
+
+    def client(self, timeout: float = PATIENCE, connect_timeout: Optional[float] = None) -> dyfos.Client:
+        return dyfos.Client(
+            prefix=self.prefix, domain=self.domain, timeout=timeout, connect_timeout=connect_timeout or timeout
+        )
+
+    def flags(self) -> List[str]:
+        return ["--prefix", self.prefix, "--domain", self.domain]
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def kill(self, sig: int = signal.SIGKILL) -> None:
+        if self.alive():
+            self.process.send_signal(sig)
+        self.process.wait(timeout=PATIENCE)
+
+    def stop(self) -> None:
+        """SIGTERM (a clean stop), SIGKILL if it does not exit; removes what it left."""
+        if self.alive():
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=PATIENCE)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        self._log.close()
+        shutil.rmtree(self.state_dir, ignore_errors=True)
+        self.log_path.unlink(missing_ok=True)
+        _remove_domain_files(self.domain)
+
+
+def _remove_domain_files(domain: str) -> None:
+    """Shared memory and iceoryx2 state files of a domain that a killed process left."""
+    for root in (Path("/dev/shm"), Path("/tmp/iceoryx2")):
+        if not root.is_dir():
+            continue
+        for path in list(root.rglob(f"{domain}*")):
+            try:
+                if path.is_file() or path.is_symlink() or path.is_socket():
+                    path.unlink()
+            except OSError:
+                pass
+
+
+@pytest.fixture(scope="session")
+def daemon() -> Iterator[Daemon]:
+    """The session's daemon; tests that kill or stop a daemon start their own."""
+    d = Daemon("session")
+    yield d
+    d.stop()
+
+
+@pytest.fixture
+def own_daemon() -> Iterator[Any]:
+    """Starts daemons for one test (``own_daemon(*flags)``); stops them after it."""
+    started: List[Daemon] = []
+
+    def start(*extra: str) -> Daemon:
+        d = Daemon("own", *extra)
+        started.append(d)
+        return d
+
+    yield start
+    for d in started:
+        d.stop()
+
+
+@pytest.fixture
+def client(daemon: Daemon) -> Iterator[dyfos.Client]:
+    with daemon.client() as c:
+        yield c
+
+
+def dyfos_cli(*args: str) -> Dict[str, Any]:
+    """Runs the ``dyfos`` command line and returns its JSON output."""
+    out = subprocess.run([DYFOS, *args], check=True, capture_output=True, text=True, timeout=300)
+    return json.loads(out.stdout)
+
+
+def slow_scenario() -> Dict[str, Any]:
+    """A scenario whose ``brute`` search takes seconds (about 10 s on 2 cores, release
+    or debug build): 4096 perimeter points per occlusion test instead of 8."""
+    s = json.loads((DATA / "anisotropic-mirror-basin.json").read_text())
+    s["params"] = {"perimeter_points": 4096}
+    return s
+
+
+def write_json(tmp_path: Path, name: str, value: Any) -> Path:
+    path = tmp_path / name
+    path.write_text(json.dumps(value))
+    return path
