@@ -5,9 +5,6 @@
 # Idempotent; fast when everything is there. Run from anywhere.
 #
 #   client/ffi/test.sh            # build the daemon and CLI, then cargo test -p dyfos-ffi
-if [ "${1:-}" = "--cmake" ]; then
-  cargo test -p dyfos-ffi --test c_and_cpp -- --ignored the_cmake_package_finds_the_library
-fi
 #   client/ffi/test.sh --deps     # only install the system tools (before `cargo test --workspace`)
 #   client/ffi/test.sh --cmake    # also install cmake and test the CMake package (slower)
 set -euo pipefail
