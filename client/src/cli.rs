@@ -29,3 +29,10 @@ pub fn numeric_flags_refusing_signs(cmd: &clap::Command) -> Vec<String> {
     }
     out
 }
+
+/// Panics, naming them, if [`numeric_flags_refusing_signs`] finds any: the test
+/// every dyfos binary runs on its own command line.
+pub fn assert_numeric_flags_take_signs(cmd: &clap::Command) {
+    let refusing = numeric_flags_refusing_signs(cmd);
+    assert!(refusing.is_empty(), "set allow_hyphen_values on {refusing:?}");
+}
