@@ -1,57 +1,110 @@
 //! Our `.bt` reader against OctoMap's own (liboctomap, Debian's `liboctomap-dev`):
 //! the same occupied nodes, node count and resolution, on OctoMap's published map of
-//! a real building (`tests/data/octomap/geb079.bt`, BSD, licence beside it).
+//! a real building (`tests/data/octomap/geb079.bt`, BSD, licence beside it) and on maps
+//! liboctomap writes here, pruned and unpruned, at several resolutions.
 //!
 //! The oracle, `tests/oracle/octomap_cells.cpp`, is compiled here with the system
 //! C++ compiler; `scripts/test` installs `liboctomap-dev` on a fresh machine.
 
 use dyfos_shared::world::octomap::Octomap;
 use dyfos_tests::data;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::OnceLock;
 
-fn oracle() -> PathBuf {
-    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("octomap_cells");
-    let source = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("oracle/octomap_cells.cpp");
-    let built = Command::new("c++")
-        .arg("-O1")
-        .arg("-o")
-        .arg(&out)
-        .arg(&source)
-        .args(["-loctomap", "-loctomath"])
-        .output()
-        .expect("run the C++ compiler");
-    assert!(
-        built.status.success(),
-        "cannot build the liboctomap oracle (install liboctomap-dev; scripts/test does): {}",
-        String::from_utf8_lossy(&built.stderr)
-    );
-    out
+fn oracle() -> &'static Path {
+    static BUILT: OnceLock<PathBuf> = OnceLock::new();
+    BUILT.get_or_init(|| {
+        let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("octomap_cells");
+        let source = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("oracle/octomap_cells.cpp");
+        let built = Command::new("c++")
+            .arg("-O1")
+            .arg("-o")
+            .arg(&out)
+            .arg(&source)
+            .args(["-loctomap", "-loctomath"])
+            .output()
+            .expect("run the C++ compiler");
+        assert!(
+            built.status.success(),
+            "cannot build the liboctomap oracle (install liboctomap-dev; scripts/test does): {}",
+            String::from_utf8_lossy(&built.stderr)
+        );
+        out
+    })
 }
 
-#[test]
-fn the_reader_finds_the_occupied_nodes_liboctomap_finds() {
-    let file = data("octomap/geb079.bt");
-    let listed = Command::new(oracle()).arg(&file).output().expect("run the oracle");
+/// What liboctomap reads from `file`: occupied nodes (min index, side), sorted; node
+/// count; resolution.
+fn liboctomap(file: &Path) -> (Vec<[i64; 4]>, u64, f64) {
+    let listed = Command::new(oracle()).arg(file).output().expect("run the oracle");
     assert!(listed.status.success(), "{}", String::from_utf8_lossy(&listed.stderr));
     let text = String::from_utf8(listed.stdout).unwrap();
-    let (cubes, last) = text.trim_end().rsplit_once('\n').unwrap();
-    let mut expected: Vec<[i64; 4]> = cubes
+    let (cubes, last) = text.trim_end().rsplit_once('\n').unwrap_or(("", text.trim_end()));
+    let mut nodes: Vec<[i64; 4]> = cubes
         .lines()
         .map(|l| {
             let v: Vec<i64> = l.split(' ').map(|n| n.parse().unwrap()).collect();
             [v[0], v[1], v[2], v[3]]
         })
         .collect();
-    let map = Octomap::from_bt(&std::fs::read(&file).unwrap()).unwrap();
-    let mut got: Vec<[i64; 4]> = map.occupied().iter().map(|c| [c.min[0], c.min[1], c.min[2], c.side]).collect();
-    expected.sort_unstable();
-    got.sort_unstable();
-    assert_eq!(got.len(), expected.len());
-    assert_eq!(got, expected, "the occupied nodes differ");
+    nodes.sort_unstable();
     let fields: Vec<&str> = last.split(' ').collect();
-    assert_eq!(fields[..3], ["nodes", &map.nodes().to_string(), "res"], "{last}");
-    assert_eq!(fields[3].parse::<f64>().unwrap().to_bits(), map.resolution().to_bits(), "{last}");
+    assert_eq!((fields[0], fields[2]), ("nodes", "res"), "{last}");
+    (nodes, fields[1].parse().unwrap(), fields[3].parse().unwrap())
+}
+
+/// What our reader reads, in the same form.
+fn ours(file: &Path) -> (Vec<[i64; 4]>, u64, f64) {
+    let map = Octomap::from_bt(&std::fs::read(file).unwrap()).unwrap();
+    let mut nodes: Vec<[i64; 4]> = map.occupied().iter().map(|c| [c.min[0], c.min[1], c.min[2], c.side]).collect();
+    nodes.sort_unstable();
+    (nodes, map.nodes(), map.resolution())
+}
+
+#[test]
+fn the_reader_finds_the_occupied_nodes_liboctomap_finds() {
+    let file = data("octomap/geb079.bt");
+    let (expected, got) = (liboctomap(&file), ours(&file));
+    assert_eq!(got.0.len(), expected.0.len());
+    assert_eq!(got.0, expected.0, "the occupied nodes differ");
+    assert_eq!((got.1, got.2.to_bits()), (expected.1, expected.2.to_bits()));
     // The data's own README: 143 729 occupied leaves, 185 673 finest cells.
-    assert_eq!((got.len(), map.cell_count()), (143_729, 185_673));
+    let cells: i64 = got.0.iter().map(|c| c[3].pow(3)).sum();
+    assert_eq!((got.0.len(), cells), (143_729, 185_673));
+}
+
+#[test]
+fn maps_liboctomap_writes_pruned_or_not_read_the_same() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("octomap-generated");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut pruned_nodes = 0;
+    for (res, seed) in [("0.05", "1"), ("0.1", "2"), ("0.37", "3")] {
+        let mut cells_by_form = Vec::new();
+        for form in ["pruned", "unpruned"] {
+            let file = dir.join(format!("map-{res}-{seed}-{form}.bt"));
+            let made = Command::new(oracle())
+                .args(["generate"])
+                .arg(&file)
+                .args([res, seed, form])
+                .output()
+                .expect("run the oracle");
+            assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+            let (expected, got) = (liboctomap(&file), ours(&file));
+            assert_eq!(got.0, expected.0, "{res} {form}: the occupied nodes differ");
+            assert_eq!((got.1, got.2.to_bits()), (expected.1, expected.2.to_bits()), "{res} {form}");
+            pruned_nodes += got.0.iter().filter(|c| c[3] > 1).count();
+            let mut cells: Vec<[i64; 3]> = Octomap::from_bt(&std::fs::read(&file).unwrap())
+                .unwrap()
+                .occupied()
+                .iter()
+                .flat_map(|c| c.cells().collect::<Vec<_>>())
+                .collect();
+            cells.sort_unstable();
+            cells_by_form.push(cells);
+        }
+        // Pruning changes the tree, not the occupied cells.
+        assert_eq!(cells_by_form[0], cells_by_form[1], "{res}: pruned and unpruned maps differ in cells");
+    }
+    assert!(pruned_nodes >= 9, "the pruned maps have no node above the finest depth to check");
 }
