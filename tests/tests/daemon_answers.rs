@@ -309,3 +309,41 @@ fn a_failed_query_reports_the_version_its_inline_deltas_made() {
     let unknown = client.rendezvous(&RendezvousRequest::new(99, s.belief), PATIENCE).unwrap_err();
     assert_eq!((unknown.status(), unknown.map_version()), (Some(Status::UnknownMap), None), "{unknown}");
 }
+
+/// `dyfos map upload --octomap`: OctoMap's real building map uploaded as a map's
+/// occupied cells answers, through the daemon, as the scenario that names the same
+/// `.bt` file does offline, bit for bit.
+#[test]
+fn an_octomap_uploaded_to_the_daemon_answers_as_its_scenario_offline() {
+    let sandbox = Sandbox::new("octomap-upload");
+    let _daemon = sandbox.start_daemon(&[]);
+    let scenario = data("octomap/geb079-scenario.json");
+    let upload = Command::new(bin("dyfos"))
+        .args(["map", "upload", "5", "--octomap"])
+        .arg(data("octomap/geb079.bt"))
+        .args(["--origin", "0", "0", "0.32", "--bounds", "-12", "-8", "31", "10", "--sun", "0.6", "2.4"])
+        .args(sandbox.dyfos_flags())
+        .output()
+        .unwrap();
+    assert!(upload.status.success(), "{}", String::from_utf8_lossy(&upload.stderr));
+    // The scenario's map has the same content, so the query reuses map 5 as it is.
+    let query = sandbox.dyfos("query").arg(&scenario).args(["--map", "5", "--seed", "1"]).output().unwrap();
+    assert!(query.status.success(), "{}", String::from_utf8_lossy(&query.stderr));
+    let solve = Command::new(bin("dyfos")).arg("solve").arg(&scenario).args(["--seed", "1"]).output().unwrap();
+    assert!(solve.status.success(), "{}", String::from_utf8_lossy(&solve.stderr));
+    let json = |out: &[u8]| without_micros(serde_json::from_slice(out).unwrap());
+    assert_eq!(json(&query.stdout), json(&solve.stdout));
+    let map = sandbox.client().snapshot(5, PATIENCE).unwrap();
+    assert_eq!((map.version(), map.voxels().unwrap().occupied().len()), (0, 185_673));
+    // Without bounds and sun, or with a file that is not an OctoMap: exit 2, no map.
+    let refused = Command::new(bin("dyfos"))
+        .args(["map", "upload", "6", "--octomap"])
+        .arg(&scenario)
+        .args(["--bounds", "-12", "-8", "31", "10", "--sun", "0.6", "2.4"])
+        .args(sandbox.dyfos_flags())
+        .output()
+        .unwrap();
+    assert_eq!(refused.status.code(), Some(2), "{}", String::from_utf8_lossy(&refused.stderr));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("not an OctoMap .bt file"));
+    assert!(sandbox.client().snapshot(6, PATIENCE).is_err());
+}

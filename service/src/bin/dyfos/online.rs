@@ -81,11 +81,28 @@ pub enum MapCommand {
         daemon: DaemonArgs,
     },
     /// Upload a scenario file's map (bounds, sun, obstacles, voxels).
+    /// Upload a scenario file's map (bounds, sun, obstacles, voxels or octomap), or an
+    /// OctoMap `.bt` file as the map's occupied cells (`--octomap` with `--bounds` and
+    /// `--sun`).
     Upload {
         /// Map id.
         id: MapId,
         /// Scenario file.
-        scenario: PathBuf,
+        #[arg(required_unless_present = "octomap")]
+        scenario: Option<PathBuf>,
+        /// An OctoMap `.bt` file (type `OcTree`) whose occupied cells are the map.
+        #[arg(long, conflicts_with = "scenario", requires_all = ["bounds", "sun"])]
+        octomap: Option<PathBuf>,
+        /// With `--octomap`: where the minimum corner of OctoMap cell (0, 0, 0) lies in
+        /// the map frame, X Y Z (default 0 0 0).
+        #[arg(long, num_args = 3, allow_hyphen_values = true, requires = "octomap")]
+        origin: Option<Vec<f64>>,
+        /// With `--octomap`: map bounds X_MIN Y_MIN X_MAX Y_MAX.
+        #[arg(long, num_args = 4, allow_hyphen_values = true, requires = "octomap")]
+        bounds: Option<Vec<f64>>,
+        /// With `--octomap`: sun ELEVATION AZIMUTH (rad).
+        #[arg(long, num_args = 2, allow_hyphen_values = true, requires = "octomap")]
+        sun: Option<Vec<f64>>,
         /// Replace an existing map.
         #[arg(long)]
         replace: bool,
@@ -191,10 +208,14 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
             let version = daemon.connect()?.create_map(*id, b, s, daemon.timeout()?).map_err(map_failure)?;
             crate::print_json(&serde_json::json!({"map": id, "version": version}));
         }
-        MapCommand::Upload { id, scenario, replace, daemon } => {
-            let scenario = load_scenario(scenario)?;
+        MapCommand::Upload { id, scenario, octomap, origin, bounds, sun, replace, daemon } => {
+            let world = match (scenario, octomap) {
+                (Some(scenario), _) => load_scenario(scenario)?.world,
+                (None, Some(file)) => octomap_world(file, origin.as_deref(), bounds.as_deref(), sun.as_deref())?,
+                (None, None) => return Err(Failure::invalid(anyhow!("give a scenario file or --octomap FILE.bt"))),
+            };
             let version =
-                daemon.connect()?.upload_map(*id, &scenario.world, *replace, daemon.timeout()?).map_err(map_failure)?;
+                daemon.connect()?.upload_map(*id, &world, *replace, daemon.timeout()?).map_err(map_failure)?;
             crate::print_json(&serde_json::json!({"map": id, "version": version}));
         }
         MapCommand::Apply { id, deltas, expected_version, daemon } => {
@@ -220,6 +241,30 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
         }
     }
     Ok(())
+}
+
+/// The world of `dyfos map upload --octomap`: the file's occupied cells as voxels
+/// (SPEC §1), no obstacles. Every problem is exit code 2.
+fn octomap_world(
+    file: &std::path::Path,
+    origin: Option<&[f64]>,
+    bounds: Option<&[f64]>,
+    sun: Option<&[f64]>,
+) -> Result<World, Failure> {
+    let (Some(&[x0, y0, x1, y1]), Some(&[elevation, azimuth])) = (bounds, sun) else {
+        return Err(Failure::invalid(anyhow!("--octomap needs --bounds X_MIN Y_MIN X_MAX Y_MAX and --sun EL AZ")));
+    };
+    let origin = match origin {
+        Some(&[x, y, z]) => Point3::new(x, y, z),
+        _ => Point3::origin(),
+    };
+    let bytes = std::fs::read(file).map_err(|e| Failure::invalid(anyhow!("cannot read {}: {e}", file.display())))?;
+    let map = dyfos_shared::world::octomap::Octomap::from_bt(&bytes)
+        .map_err(|e| Failure::invalid(anyhow!("{}: {e}", file.display())))?;
+    let voxels = map.to_voxels(origin).map_err(|e| Failure::invalid(anyhow!("{}: {e}", file.display())))?;
+    let bounds = Bounds::new([x0, y0, x1, y1]).map_err(|e| Failure::invalid(anyhow!("--bounds: {e}")))?;
+    let sun = Sun::new(elevation, azimuth).map_err(|e| Failure::invalid(anyhow!("--sun: {e}")))?;
+    World::new(0, bounds, sun, [], Some(voxels)).map_err(|e| Failure::invalid(anyhow!("{}: {e}", file.display())))
 }
 
 /// `dyfos stats`.
