@@ -335,6 +335,25 @@ fn an_octomap_uploaded_to_the_daemon_answers_as_its_scenario_offline() {
     assert_eq!(json(&query.stdout), json(&solve.stdout));
     let map = sandbox.client().snapshot(5, PATIENCE).unwrap();
     assert_eq!((map.version(), map.voxels().unwrap().occupied().len()), (0, 185_673));
+    // And back out as a .bt: the same occupied cells as the file uploaded.
+    let written = sandbox.state_dir.with_extension("snapshot.bt");
+    let snapshot = Command::new(bin("dyfos"))
+        .args(["map", "snapshot", "5", "--bt"])
+        .arg(&written)
+        .args(sandbox.dyfos_flags())
+        .output()
+        .unwrap();
+    assert!(snapshot.status.success(), "{}", String::from_utf8_lossy(&snapshot.stderr));
+    let printed: serde_json::Value = serde_json::from_slice(&snapshot.stdout).unwrap();
+    assert_eq!((printed["cells"].as_u64(), printed["origin"][2].as_f64()), (Some(185_673), Some(0.32)));
+    let cells = |bytes: &[u8]| {
+        let map = dyfos_shared::world::octomap::Octomap::from_bt(bytes).unwrap();
+        let mut c: Vec<[i64; 3]> = map.occupied().iter().flat_map(|c| c.cells().collect::<Vec<_>>()).collect();
+        c.sort_unstable();
+        c
+    };
+    assert_eq!(cells(&std::fs::read(&written).unwrap()), cells(&std::fs::read(data("octomap/geb079.bt")).unwrap()));
+    let _ = std::fs::remove_file(&written);
     // Without bounds and sun, or with a file that is not an OctoMap: exit 2, no map.
     let refused = Command::new(bin("dyfos"))
         .args(["map", "upload", "6", "--octomap"])

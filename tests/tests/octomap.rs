@@ -108,3 +108,27 @@ fn maps_liboctomap_writes_pruned_or_not_read_the_same() {
     }
     assert!(pruned_nodes >= 9, "the pruned maps have no node above the finest depth to check");
 }
+
+/// What dyfos writes (`write_bt`, behind `dyfos map snapshot --bt`) liboctomap reads
+/// back to the same occupied cells.
+#[test]
+fn liboctomap_reads_the_files_dyfos_writes() {
+    let original = Octomap::from_bt(&std::fs::read(data("octomap/geb079.bt")).unwrap()).unwrap();
+    let mut cells: Vec<[i64; 3]> = original.occupied().iter().flat_map(|c| c.cells().collect::<Vec<_>>()).collect();
+    cells.sort_unstable();
+    let file = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("written-by-dyfos.bt");
+    let bytes = dyfos_shared::world::octomap::write_bt(original.resolution(), cells.iter().copied()).unwrap();
+    std::fs::write(&file, bytes).unwrap();
+    let (nodes, _, res) = liboctomap(&file);
+    let mut back: Vec<[i64; 3]> = nodes
+        .iter()
+        .flat_map(|c| {
+            let s = c[3];
+            (0..s * s * s).map(move |n| [c[0] + n % s, c[1] + (n / s) % s, c[2] + n / (s * s)])
+        })
+        .collect();
+    back.sort_unstable();
+    assert_eq!(back.len(), cells.len());
+    assert_eq!(back, cells, "liboctomap reads other cells from the written file");
+    assert_eq!(res.to_bits(), original.resolution().to_bits());
+}

@@ -102,6 +102,9 @@ pub enum OctomapError {
     /// The tree data is inconsistent.
     #[error("OctoMap data is corrupt: {0}")]
     Corrupt(String),
+    /// A cell to write lies outside OctoMap's keys.
+    #[error("cell {0:?} lies outside OctoMap's key range (indices -32768 to 32767 per axis); move the map's origin")]
+    OutOfRange(CellIndex),
 }
 
 impl Octomap {
@@ -145,6 +148,79 @@ impl Octomap {
         }
         crate::world::VoxelGrid::new(self.resolution, origin, self.occupied.iter().flat_map(OccupiedCube::cells))
     }
+}
+
+/// Writes `cells` (indices, any order, duplicates allowed) as a `.bt` file of
+/// resolution `resolution`, as `OcTree::writeBinary` would: a full octant of occupied
+/// cells becomes one pruned node, everything else unknown (OctoMap reads it back with
+/// the same occupied cells). A cell outside OctoMap's key range (index < −32768 or
+/// ≥ 32768 on an axis) is an error naming it.
+pub fn write_bt(resolution: f64, cells: impl IntoIterator<Item = CellIndex>) -> Result<Vec<u8>, OctomapError> {
+    let mut keys: Vec<u64> = Vec::new();
+    for c in cells {
+        let mut k = [0u64; 3];
+        for axis in 0..3 {
+            let key = c[axis] + KEY_OFFSET;
+            if !(0..1 << TREE_DEPTH).contains(&key) {
+                return Err(OctomapError::OutOfRange(c));
+            }
+            k[axis] = key as u64;
+        }
+        keys.push(morton(k));
+    }
+    keys.sort_unstable();
+    keys.dedup();
+    let mut data = Vec::new();
+    let nodes = if keys.is_empty() { 0 } else { 1 + write_node(&keys, 0, &mut data) };
+    let mut out =
+        format!("{BT_MAGIC}\n# written by dyfos\nid OcTree\nsize {nodes}\nres {resolution}\ndata\n").into_bytes();
+    out.extend(data);
+    Ok(out)
+}
+
+/// Interleaves the three 16-bit keys so that, from the top, each 3-bit group is
+/// the child index at that depth (x in bit 0, y in bit 1, z in bit 2).
+fn morton(k: [u64; 3]) -> u64 {
+    let mut m = 0;
+    for bit in 0..TREE_DEPTH as u64 {
+        for (axis, key) in k.iter().enumerate() {
+            m |= ((key >> bit) & 1) << (3 * bit + axis as u64);
+        }
+    }
+    m
+}
+
+/// Writes the inner node whose cells (Morton-sorted, all within it) are `keys`, at
+/// `depth`, and its inner descendants; returns how many child nodes it wrote.
+fn write_node(keys: &[u64], depth: u32, out: &mut Vec<u8>) -> u64 {
+    let shift = 3 * (TREE_DEPTH - 1 - depth);
+    let child_cells = 1u64 << shift; // cells in a full child
+    let at = out.len();
+    out.extend([0, 0]);
+    let mut bits = 0u16;
+    let mut nodes = 0;
+    let mut inner = Vec::new();
+    let mut rest = keys;
+    for i in 0..8u64 {
+        let n = rest.iter().take_while(|k| (*k >> shift) & 7 == i).count();
+        let (mine, tail) = rest.split_at(n);
+        rest = tail;
+        if mine.is_empty() {
+            continue;
+        }
+        nodes += 1;
+        let full = mine.len() as u64 == child_cells; // deduplicated, so full means every cell
+        let code: u16 = if full { 2 } else { 3 };
+        bits |= code << (2 * i);
+        if !full {
+            inner.push(mine);
+        }
+    }
+    out[at..at + 2].copy_from_slice(&bits.to_le_bytes());
+    for mine in inner {
+        nodes += write_node(mine, depth + 1, out);
+    }
+    nodes
 }
 
 /// Splits the header from the data: (resolution, node count, data).
@@ -348,6 +424,26 @@ mod tests {
         assert!(err.to_string().contains("finest depth"), "{err}");
         // An empty tree has no data.
         assert_eq!(Octomap::from_bt(&file("id OcTree\nsize 0\nres 0.1\ndata\n", &[])).unwrap().cell_count(), 0);
+    }
+
+    #[test]
+    fn written_files_read_back_to_the_same_cells() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut cells: Vec<CellIndex> = (0..2000).map(|_| std::array::from_fn(|_| rng.random_range(-40..40))).collect();
+        // A full 4-cell block aligned to 4: one pruned node.
+        cells.extend((0..64).map(|n| [8 + n % 4, 12 + (n / 4) % 4, -16 + n / 16]));
+        cells.extend([[-32768, 32767, 0]]);
+        let bt = write_bt(0.05, cells.iter().copied()).unwrap();
+        let map = Octomap::from_bt(&bt).unwrap();
+        let mut back: Vec<CellIndex> = map.occupied().iter().flat_map(|c| c.cells().collect::<Vec<_>>()).collect();
+        back.sort_unstable();
+        cells.sort_unstable();
+        cells.dedup();
+        assert_eq!(back, cells);
+        assert!(map.occupied().iter().any(|c| c.side == 4));
+        assert_eq!(map.resolution(), 0.05);
+        assert!(write_bt(0.1, [[32768, 0, 0]]).is_err());
+        assert_eq!(Octomap::from_bt(&write_bt(0.1, []).unwrap()).unwrap().cell_count(), 0);
     }
 
     #[test]

@@ -126,6 +126,10 @@ pub enum MapCommand {
     Snapshot {
         /// Map id.
         id: MapId,
+        /// Write the map's occupied voxels to this OctoMap `.bt` file instead of
+        /// printing the map; prints the resolution and origin the file cannot hold.
+        #[arg(long)]
+        bt: Option<PathBuf>,
         #[command(flatten)]
         daemon: DaemonArgs,
     },
@@ -227,7 +231,27 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
                 daemon.connect()?.apply(*id, *expected_version, &batch, daemon.timeout()?).map_err(map_failure)?;
             crate::print_json(&serde_json::json!({"map": id, "version": version}));
         }
-        MapCommand::Snapshot { id, daemon } => {
+        MapCommand::Snapshot { id, bt: Some(file), daemon } => {
+            let world = daemon.connect()?.snapshot(*id, daemon.timeout()?).map_err(map_failure)?;
+            let Some(voxels) = world.voxels() else {
+                return Err(Failure::invalid(anyhow!("map {id} has no voxels to write as an OctoMap")));
+            };
+            let bytes = dyfos_shared::world::octomap::write_bt(voxels.resolution(), voxels.occupied().copied())
+                .map_err(Failure::invalid)?;
+            std::fs::write(file, bytes).map_err(|e| anyhow!("cannot write {}: {e}", file.display()))?;
+            // A .bt holds cells by key only: the origin, and any cylinders and boxes,
+            // are not in it.
+            crate::print_json(&serde_json::json!({
+                "map": id,
+                "version": world.version(),
+                "bt": file,
+                "cells": voxels.occupied().len(),
+                "resolution": voxels.resolution(),
+                "origin": <[f64; 3]>::from(voxels.origin().coords),
+                "obstacles_not_written": world.obstacles().len(),
+            }));
+        }
+        MapCommand::Snapshot { id, bt: None, daemon } => {
             let world = daemon.connect()?.snapshot(*id, daemon.timeout()?).map_err(map_failure)?;
             let mut json = serde_json::json!({"map": id});
             if let (Some(out), serde_json::Value::Object(fields)) = (json.as_object_mut(), world.to_json()) {
