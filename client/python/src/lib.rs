@@ -28,7 +28,8 @@ use std::time::{Duration, Instant};
 
 /// A failure on its way to Python: the wire status name (or a local one), the
 /// sentence saying what to do, whether retrying may help, and the index of the
-/// failing delta for delta errors.
+/// failing delta for delta errors, and for rendezvous errors the version the
+/// request left the map at.
 ///
 /// Local names (no wire status): `no_daemon`, `daemon_gone`, `timeout`,
 /// `incompatible_daemon`, `ipc_error`, `invalid_prefix`, `invalid_domain`,
@@ -39,11 +40,12 @@ struct ErrorInfo {
     detail: String,
     retryable: bool,
     index: Option<u64>,
+    map_version: Option<u64>,
 }
 
 impl ErrorInfo {
     fn new(status: &'static str, detail: impl ToString) -> Self {
-        ErrorInfo { status, detail: detail.to_string(), retryable: false, index: None }
+        ErrorInfo { status, detail: detail.to_string(), retryable: false, index: None, map_version: None }
     }
 
     fn rejection(r: &Rejection) -> Self {
@@ -52,6 +54,7 @@ impl ErrorInfo {
             detail: r.message.clone(),
             retryable: r.status.is_retryable(),
             index: r.index,
+            map_version: r.map_version,
         }
     }
 }
@@ -90,7 +93,7 @@ macro_rules! request_error_info {
 }
 request_error_info!(RendezvousError, MapRequestError, StatsRequestError);
 
-/// The Python callable `(status, detail, retryable, index) -> exception`.
+/// The Python callable `(status, detail, retryable, index, map_version) -> exception`.
 static ERROR_FACTORY: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
 
 /// The Python exception for `e`, made by the registered factory.
@@ -98,14 +101,14 @@ fn to_pyerr(py: Python<'_>, e: ErrorInfo) -> PyErr {
     let Some(factory) = ERROR_FACTORY.get(py) else {
         return PyRuntimeError::new_err(format!("{}: {}", e.status, e.detail));
     };
-    match factory.call1(py, (e.status, e.detail, e.retryable, e.index)) {
+    match factory.call1(py, (e.status, e.detail, e.retryable, e.index, e.map_version)) {
         Ok(exception) => PyErr::from_value(exception.into_bound(py)),
         Err(err) => err,
     }
 }
 
 /// Registers the callable that turns a failure into the `dyfos.DyfosError` subclass
-/// to raise: `factory(status, detail, retryable, index)`. Called once by `dyfos`.
+/// to raise: `factory(status, detail, retryable, index, map_version)`. Called once by `dyfos`.
 #[pyfunction]
 fn set_error_factory(py: Python<'_>, factory: Py<PyAny>) {
     let _ = ERROR_FACTORY.set(py, factory);

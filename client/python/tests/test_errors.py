@@ -108,7 +108,23 @@ def test_invalid_map_requests(client: dyfos.Client, tmp_path: Path) -> None:
 
 def test_no_feasible_pose(client: dyfos.Client) -> None:
     infeasible_map(client, 0xF00)
-    raises(dyfos.NoFeasiblePoseError, "no_feasible_pose", client.rendezvous, 0xF00, MEAN, COV, algorithm="dyfos")
+    e = raises(dyfos.NoFeasiblePoseError, "no_feasible_pose", client.rendezvous, 0xF00, MEAN, COV, algorithm="dyfos")
+    assert e.map_version == 1  # the map as it is: create (0), one wall (1)
+
+
+def test_a_failed_query_tells_the_version_its_inline_deltas_made(client: dyfos.Client) -> None:
+    infeasible_map(client, 0xF02)
+    sun = {"SetSun": {"elevation": 0.5, "azimuth": 1.0}}
+    e = raises(
+        dyfos.NoFeasiblePoseError, "no_feasible_pose", client.rendezvous, 0xF02, MEAN, COV, deltas=[sun, sun]
+    )
+    assert e.map_version == 3, "the two inline deltas stay applied"
+    stale = raises(
+        dyfos.MapVersionMismatchError, "map_version_mismatch", client.rendezvous, 0xF02, MEAN, COV, expected_version=1
+    )
+    assert stale.map_version == 3
+    unknown = raises(dyfos.UnknownMapError, "unknown_map", client.rendezvous, 0xF03, MEAN, COV)
+    assert unknown.map_version is None
 
 
 def test_deadline_exceeded(client: dyfos.Client) -> None:

@@ -110,19 +110,34 @@ class DyfosError(Exception):
         retryable: whether sending the same request again may succeed.
         index: for ``invalid_delta`` / ``malformed_delta``, the failing delta's
             position in its batch; else ``None``.
+        map_version: for a refused ``rendezvous``, the version the request left the
+            map at: after its inline ``deltas`` when they were applied before the
+            search failed (``no_feasible_pose``, ``deadline_exceeded``,
+            ``internal_error``), else the map's version as it was; ``None`` if no map
+            has the id or the failure never reached the daemon. Retry with
+            ``expected_version=error.map_version``.
     """
 
     status: str
     detail: str
     retryable: bool
     index: Optional[int]
+    map_version: Optional[int]
 
-    def __init__(self, status: str, detail: str, retryable: bool = False, index: Optional[int] = None) -> None:
-        super().__init__(status, detail, retryable, index)
+    def __init__(
+        self,
+        status: str,
+        detail: str,
+        retryable: bool = False,
+        index: Optional[int] = None,
+        map_version: Optional[int] = None,
+    ) -> None:
+        super().__init__(status, detail, retryable, index, map_version)
         self.status = status
         self.detail = detail
         self.retryable = retryable
         self.index = index
+        self.map_version = map_version
 
     def __str__(self) -> str:
         return f"{self.status}: {self.detail}"
@@ -198,9 +213,11 @@ for _status in (
     _FAMILIES[_status] = InvalidRequestError
 
 
-def _make_error(status: str, detail: str, retryable: bool, index: Optional[int]) -> DyfosError:
+def _make_error(
+    status: str, detail: str, retryable: bool, index: Optional[int], map_version: Optional[int] = None
+) -> DyfosError:
     """The exception for a failure reported by the extension module."""
-    return _FAMILIES.get(status, DyfosError)(status, detail, retryable, index)
+    return _FAMILIES.get(status, DyfosError)(status, detail, retryable, index, map_version)
 
 
 _dyfos.set_error_factory(_make_error)

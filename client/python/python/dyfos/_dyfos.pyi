@@ -4,7 +4,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 DEFAULT_PREFIX: str
 
-def set_error_factory(factory: Callable[[str, str, bool, Optional[int]], BaseException]) -> None:
+def set_error_factory(factory: Callable[[str, str, bool, Optional[int], Optional[int]], BaseException]) -> None:
     """Registers the callable that makes the exception to raise for a failure."""
 
 class RawAnswer:
