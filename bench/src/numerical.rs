@@ -188,6 +188,7 @@ pub fn voxelized(scenario: &Scenario, resolution: f64) -> Result<Scenario, Voxel
     let world = &scenario.world;
     let b = world.bounds();
     let origin = Point3::new(b.min.x, b.min.y, 0.0);
+    let mut grid = VoxelGrid::empty(resolution, origin)?;
     let mut cells: Vec<CellIndex> = Vec::new();
     // Index range of cells whose open interval overlaps the open interval (lo, hi).
     let span = |lo: f64, hi: f64, o: f64| -> (i64, i64) {
@@ -225,12 +226,13 @@ pub fn voxelized(scenario: &Scenario, resolution: f64) -> Result<Scenario, Voxel
                 }
             }
         }
-        if cells.len() > dyfos_shared::limits::MAX_OCCUPIED_VOXELS * 2 {
-            // Early out before building a set that cannot be accepted anyway.
-            return Err(VoxelError::TooManyCells { count: cells.len() });
+        // Into the grid a million at a time: the list would outgrow the grid.
+        if cells.len() > 1 << 20 {
+            grid = grid.with_cells(&cells, true)?;
+            cells.clear();
         }
     }
-    let grid = VoxelGrid::new(resolution, origin, cells)?;
+    let grid = grid.with_cells(&cells, true)?;
     let world = World::new(world.version(), *b, *world.sun(), [], Some(grid)).expect("no obstacles to reject");
     Ok(Scenario { world, ..scenario.clone() })
 }
@@ -323,7 +325,7 @@ mod tests {
             }
         }
         // Rasterized area ≈ the discs' area (each within one cell ring of it).
-        let cells_per_layer = grid.occupied().filter(|c| c[2] == 0).count() as f64;
+        let cells_per_layer = grid.cells().filter(|c| c[2] == 0).count() as f64;
         let disc_area: f64 = s
             .world
             .obstacles()
@@ -334,7 +336,7 @@ mod tests {
             })
             .sum();
         assert!(cells_per_layer * 0.01 > 0.8 * disc_area && cells_per_layer * 0.01 < 1.6 * disc_area);
-        assert_eq!(grid.occupied().filter(|c| c[2] == 99).count() as f64, cells_per_layer);
-        assert_eq!(grid.occupied().filter(|c| c[2] >= 100).count(), 0);
+        assert_eq!(grid.cells().filter(|c| c[2] == 99).count() as f64, cells_per_layer);
+        assert_eq!(grid.cells().filter(|c| c[2] >= 100).count(), 0);
     }
 }

@@ -77,7 +77,7 @@ pub fn obstacle_scaling(
             let grids: Result<Vec<_>, _> = scenarios.iter().map(|s| voxelized(s, resolution)).collect();
             match grids {
                 Ok(grids) => {
-                    let cells = grids.iter().map(|g| g.world.voxels().map_or(0, |v| v.occupied().len())).max();
+                    let cells = grids.iter().map(|g| g.world.voxels().map_or(0, |v| v.len() as usize)).max();
                     rows.push(row(n, &config, kind, cells, &grids, &contender, seed));
                 }
                 Err(e) => rows.push(ScalingRow {

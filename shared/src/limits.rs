@@ -6,12 +6,20 @@
 /// Most obstacles (cylinders and boxes) one map may hold.
 pub const MAX_OBSTACLES: usize = 65_536;
 
-/// Most occupied voxel cells one map may hold.
-pub const MAX_OCCUPIED_VOXELS: usize = 4_000_000;
+/// Most occupied voxel cells one map may hold (2^26 = 67 108 864: 0.05 m cells
+/// covering 20 000 m² of wall and floor twice over). The grid stores them at 1–3
+/// bytes each on surfaces (`dyfos-bench octomap` measures it), so a full map is
+/// 100–200 MB.
+pub const MAX_OCCUPIED_VOXELS: usize = 1 << 26;
 
-/// Most cells of the dense occupancy bitmap spanned by the occupied voxels'
-/// bounding box (2^28 cells = 32 MiB of bits).
-pub const MAX_VOXEL_GRID_CELLS: u64 = 1 << 28;
+/// Most occupied voxel cells of all the maps one daemon holds together (2^27:
+/// two full maps, 200–400 MB).
+pub const MAX_TOTAL_VOXELS: u64 = 1 << 27;
+
+/// Most 64³-cell blocks the occupied voxels' bounding box may span (2^22: the
+/// grid's root index is 4 bytes a block, 16 MiB at most; 6.5 × 6.5 km at 0.05 m
+/// in one layer of blocks).
+pub const MAX_VOXEL_BLOCKS_SPANNED: u64 = 1 << 22;
 
 /// Largest |index| of a voxel cell on any axis.
 pub const MAX_VOXEL_INDEX: i64 = 1 << 20;
@@ -34,8 +42,9 @@ pub const MAX_DELTAS_PER_MESSAGE: usize = 4096;
 pub const MAX_INLINE_DELTAS: usize = 1024;
 
 /// Most chunks of one map upload: enough for [`MAX_OBSTACLES`] obstacles plus
-/// [`MAX_OCCUPIED_VOXELS`] cells at [`MAX_DELTAS_PER_MESSAGE`] records a chunk.
-pub const MAX_UPLOAD_CHUNKS: u32 = 1100;
+/// [`MAX_OCCUPIED_VOXELS`] cells in 4³ blocks of 4 cells or more each (a surface
+/// crossing a block holds 4 to 16) at [`MAX_DELTAS_PER_MESSAGE`] records a chunk.
+pub const MAX_UPLOAD_CHUNKS: u32 = 1 << 14;
 
 /// Most maps one daemon holds.
 pub const MAX_MAPS: usize = 256;

@@ -492,7 +492,7 @@ impl Scenario {
                 Object(RawVoxels {
                     resolution: v.resolution(),
                     origin: v.origin().coords.into(),
-                    occupied: v.occupied().copied().collect(),
+                    occupied: v.cells_sorted(),
                 })
             }),
             octomap: None,

@@ -418,6 +418,7 @@ fn tag_name(delta: &MapDelta) -> &'static str {
         MapDelta::UpsertObstacle { obstacle: Obstacle::Box(_), .. } => "UPSERT_BOX",
         MapDelta::RemoveObstacle { .. } => "REMOVE_OBSTACLE",
         MapDelta::SetVoxels { .. } => "VOXEL_RUN",
+        MapDelta::SetVoxelBlocks { .. } => "VOXEL_BLOCK_RUN",
         MapDelta::SetSun(_) => "SET_SUN",
         MapDelta::SetBounds(_) => "SET_BOUNDS",
         MapDelta::Clear => "CLEAR",
@@ -437,6 +438,8 @@ fn documented_delta_tags_and_flags_are_the_rust_ones() {
         (tag::SET_SUN, "SET_SUN"),
         (tag::SET_BOUNDS, "SET_BOUNDS"),
         (tag::CLEAR, "CLEAR"),
+        (tag::VOXEL_BLOCK_RUN, "VOXEL_BLOCK_RUN"),
+        (tag::VOXEL_BLOCK, "VOXEL_BLOCK"),
     ];
     let expected: Vec<(u64, String)> = expected.into_iter().map(|(n, s)| (u64::from(n), s.to_string())).collect();
     same_rows("delta tags", t, rows(&documented), rows(&expected));
@@ -450,6 +453,12 @@ fn documented_delta_tags_and_flags_are_the_rust_ones() {
         MapDelta::UpsertObstacle { id: 2, obstacle: Obstacle::Box(crate_) },
         MapDelta::RemoveObstacle { id: 1 },
         MapDelta::SetVoxels { resolution: 0.5, origin: na::Point3::origin(), cells: vec![[1, 2, 3]], occupied: true },
+        MapDelta::SetVoxelBlocks {
+            resolution: 0.5,
+            origin: na::Point3::origin(),
+            blocks: vec![dyfos_shared::world::VoxelBlock { min: [4, -8, 0], mask: 1 << 63 | 5 }],
+            occupied: true,
+        },
         MapDelta::SetSun(Sun::new(0.3, 1.0).expect("sun")),
         MapDelta::SetBounds(Bounds::new([-5.0, -5.0, 5.0, 5.0]).expect("bounds")),
         MapDelta::Clear,
@@ -457,8 +466,13 @@ fn documented_delta_tags_and_flags_are_the_rust_ones() {
     for delta in &every_kind {
         let records = encode_deltas(std::slice::from_ref(delta));
         assert_eq!(records[0].tag, by_name[tag_name(delta)], "{delta:?}");
-        for cell in &records[1..] {
-            assert_eq!(cell.tag, by_name["VOXEL_CELL"], "{delta:?}");
+        for item in &records[1..] {
+            let expected = if records[0].tag == by_name["VOXEL_RUN"] { "VOXEL_CELL" } else { "VOXEL_BLOCK" };
+            assert_eq!(item.tag, by_name[expected], "{delta:?}");
+        }
+        // The documented mask layout: high half in `flag`, low half in `id`.
+        if let MapDelta::SetVoxelBlocks { blocks, .. } = delta {
+            assert_eq!((records[1].flag, records[1].id, records[1].cell), (1 << 31, 5, blocks[0].min));
         }
     }
     // A record with an undocumented tag is refused; a documented one is a delta (a
@@ -469,6 +483,7 @@ fn documented_delta_tags_and_flags_are_the_rust_ones() {
         match result {
             Ok(_) => assert!(known, "tag {t} decodes but is not documented"),
             Err(e) if e.message.contains("outside a run") => assert_eq!(t, by_name["VOXEL_CELL"]),
+            Err(e) if e.message.contains("outside a block run") => assert_eq!(t, by_name["VOXEL_BLOCK"]),
             Err(e) => assert!(!known && e.message.contains("is not a delta"), "tag {t}: {e}"),
         }
     }
@@ -678,6 +693,8 @@ fn documented_constants_are_the_rust_ones() {
         ("MAX_MAPS", MAX_MAPS.to_string()),
         ("MAX_OBSTACLES", MAX_OBSTACLES.to_string()),
         ("MAX_OCCUPIED_VOXELS", MAX_OCCUPIED_VOXELS.to_string()),
+        ("MAX_TOTAL_VOXELS", dyfos_shared::limits::MAX_TOTAL_VOXELS.to_string()),
+        ("MAX_VOXEL_BLOCKS_SPANNED", dyfos_shared::limits::MAX_VOXEL_BLOCKS_SPANNED.to_string()),
         ("MAX_PERIMETER_POINTS", MAX_PERIMETER_POINTS.to_string()),
         ("MAX_DEADLINE_MICROS", MAX_DEADLINE_MICROS.to_string()),
         ("max_clients", config.max_clients.to_string()),

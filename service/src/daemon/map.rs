@@ -3,13 +3,13 @@
 //! it is visible; a failed write leaves the map as it was.
 
 use super::{Daemon, Ipc};
-use crate::store::Store;
-use dyfos_shared::limits::{MAX_MAPS, MAX_OBSTACLES, MAX_OCCUPIED_VOXELS, MAX_PENDING_UPLOADS};
+use crate::store::{Store, StoreSaveError};
+use dyfos_shared::limits::{MAX_MAPS, MAX_OBSTACLES, MAX_OCCUPIED_VOXELS, MAX_PENDING_UPLOADS, MAX_TOTAL_VOXELS};
 use dyfos_shared::wire::map::{
     MapId, MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, world_chunks, world_from_content,
 };
 use dyfos_shared::wire::{Detail, Rejection, Status, join_u128};
-use dyfos_shared::world::{Bounds, MapDelta, MapDeltaError, Sun, World};
+use dyfos_shared::world::{Bounds, MapDelta, MapDeltaError, MapDeltaErrorKind, Sun, VoxelError, World};
 use iceoryx2::active_request::ActiveRequest;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
@@ -56,7 +56,13 @@ pub(crate) fn check_version(id: MapId, world: &World, expected: Option<u64>) -> 
 }
 
 pub(crate) fn invalid_delta(e: MapDeltaError) -> Rejection {
-    Rejection::at_delta(Status::InvalidDelta, format!("{e}; nothing was applied"), e.index as u64)
+    // A map past its cell limits is a capacity refusal, not a malformed change.
+    let status = match e.kind {
+        MapDeltaErrorKind::Voxels(VoxelError::TooManyCells { .. } | VoxelError::GridTooLarge { .. })
+        | MapDeltaErrorKind::TooManyObstacles { .. } => Status::OverCapacity,
+        _ => Status::InvalidDelta,
+    };
+    Rejection::at_delta(status, format!("{e}; nothing was applied"), e.index as u64)
 }
 
 /// A map's snapshot pages, each a self-contained chunk of records.
@@ -87,6 +93,9 @@ impl Upload {
         for d in deltas {
             match d {
                 MapDelta::SetVoxels { cells, .. } => self.cells += cells.len(),
+                MapDelta::SetVoxelBlocks { blocks, .. } => {
+                    self.cells += blocks.iter().map(|b| b.mask.count_ones() as usize).sum::<usize>()
+                }
                 _ => self.obstacles += 1,
             }
         }
@@ -141,15 +150,59 @@ impl Maps {
         self.maps.get(&id).cloned()
     }
 
-    /// Persists `world` as map `id`, then makes it current.
+    /// Persists `world` as map `id` (a new base file), then makes it current.
     pub(crate) fn commit(&mut self, id: MapId, world: World, what: &str) -> Result<Arc<World>, Rejection> {
+        self.check_room(id, &world)?;
+        let saved = self.store.save(id, &world);
+        self.publish(id, world, what, saved)
+    }
+
+    /// Persists `deltas`, which made `next` from `world`, as a journal record of map
+    /// `id`, then makes `next` current: an update costs what it changes.
+    pub(crate) fn commit_deltas(
+        &mut self,
+        id: MapId,
+        world: &World,
+        deltas: &[MapDelta],
+        next: World,
+        what: &str,
+    ) -> Result<Arc<World>, Rejection> {
+        self.check_room(id, &next)?;
+        let saved = self.store.append(id, world.version(), deltas, &next);
+        self.publish(id, next, what, saved)
+    }
+
+    /// Whether the daemon may hold `world` as map `id`: the map count, and the
+    /// occupied cells of all maps together.
+    fn check_room(&self, id: MapId, world: &World) -> Result<(), Rejection> {
         if !self.maps.contains_key(&id) && self.maps.len() >= MAX_MAPS {
             return Err(Rejection::new(
                 Status::OverCapacity,
                 format!("the daemon holds {MAX_MAPS} maps, its limit; delete one first"),
             ));
         }
-        if let Err(e) = self.store.save(id, &world) {
+        let cells = |w: &World| w.voxels().map_or(0, |v| v.len());
+        let others: u64 = self.maps.iter().filter(|(m, _)| **m != id).map(|(_, w)| cells(w)).sum();
+        if others + cells(world) > MAX_TOTAL_VOXELS {
+            return Err(Rejection::new(
+                Status::OverCapacity,
+                format!(
+                    "map {id} would bring the daemon's maps to {} occupied voxel cells, more than its limit of {MAX_TOTAL_VOXELS}; delete a map or use a coarser resolution",
+                    others + cells(world)
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn publish(
+        &mut self,
+        id: MapId,
+        world: World,
+        what: &str,
+        saved: Result<(), StoreSaveError>,
+    ) -> Result<Arc<World>, Rejection> {
+        if let Err(e) = saved {
             warn!(map = id, "could not persist map: {e}");
             return Err(Rejection::new(
                 Status::StorageFailed,
@@ -371,7 +424,7 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
             check_version(map, &world, expected_version)?;
             let next = world.apply(&deltas).map_err(invalid_delta)?;
             let what = format!("{} deltas applied", deltas.len());
-            Ok(ok(map, maps.commit(map, next, &what)?.version()))
+            Ok(ok(map, maps.commit_deltas(map, &world, &deltas, next, &what)?.version()))
         }
         MapRequest::Upload {
             map,

@@ -299,6 +299,9 @@ impl Daemon {
         for q in &loaded.quarantined {
             warn!(file = %q.file.display(), moved_to = ?q.moved_to, "map file could not be loaded and was quarantined: {}", q.reason);
         }
+        for (journal, torn) in &loaded.repaired {
+            warn!(file = %journal.display(), "map journal ended in a torn record (a crash while writing an unacknowledged change); cut off: {torn}");
+        }
         if loaded.maps.len() > MAX_MAPS {
             warn!(
                 "{} maps in the state directory, more than the limit of {MAX_MAPS}; only the first are served",

@@ -320,7 +320,7 @@ fn accept(daemon: &mut Daemon, header: &RendezvousRequestHeader, records: &[Wire
         let next = world.apply(&request.deltas).map_err(invalid_delta)?;
         match mode {
             Mode::Check => Arc::new(next),
-            Mode::Solve => daemon.maps.commit(request.map, next, "inline deltas")?,
+            Mode::Solve => daemon.maps.commit_deltas(request.map, &world, &request.deltas, next, "inline deltas")?,
         }
     };
     Ok(match mode {

@@ -3,7 +3,9 @@
 //!
 //! Map content travels as a slice of fixed-size [`WireDelta`] records. One
 //! [`MapDelta`] is one record, except `SetVoxels`, which is a run header followed
-//! by one record per cell. A batch is applied whole or not at all; its error names
+//! by one record per cell, and `SetVoxelBlocks`, a run header followed by one
+//! record per 4³ block (up to 64 cells a record: uploads and snapshots of voxel
+//! maps use blocks). A batch is applied whole or not at all; its error names
 //! the failing delta's index in the batch.
 //!
 //! A map larger than one message ([`MAX_DELTAS_PER_MESSAGE`] records) is uploaded
@@ -28,7 +30,7 @@
 use super::{ANY_VERSION, Detail, Rejection, Status};
 use crate::limits::{MAX_DELTAS_PER_MESSAGE, MAX_UPLOAD_CHUNKS};
 use crate::math::{Point2, Point3};
-use crate::world::{AxisBox, Bounds, MapDelta, Obstacle, Sun, VerticalCylinder, World};
+use crate::world::{AxisBox, Bounds, MapDelta, Obstacle, Sun, VerticalCylinder, VoxelBlock, World};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// A map id, chosen by the client that creates the map.
@@ -53,19 +55,27 @@ pub mod tag {
     pub const SET_BOUNDS: u32 = 7;
     /// Remove every obstacle and voxel.
     pub const CLEAR: u32 = 8;
+    /// Voxel block run header: as [`VOXEL_RUN`], `cell[0]` the number of
+    /// [`VOXEL_BLOCK`] records that follow.
+    pub const VOXEL_BLOCK_RUN: u32 = 9;
+    /// One 4³ block of the preceding block run: `cell` its minimum cell (each index a
+    /// multiple of 4), the 64-bit cell mask in `id` (low half) and `flag` (high half);
+    /// cell `cell + (x, y, z)` is bit `16x + 4y + z`.
+    pub const VOXEL_BLOCK: u32 = 10;
 }
 
 /// One map-delta record. Fields a tag does not use are ignored (write zeros);
-/// `reserved` must be 0 and `flag` is 0 except in a voxel run.
+/// `reserved` must be 0 and `flag` is 0 except in a voxel run header and a voxel
+/// block.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[type_name("dyfos::WireDelta")]
 #[repr(C)]
 pub struct WireDelta {
     /// One of [`tag`].
     pub tag: u32,
-    /// Voxel run: 1 occupied, 0 free.
+    /// Voxel run header: 1 occupied, 0 free; voxel block: the mask's high half.
     pub flag: u32,
-    /// Obstacle id.
+    /// Obstacle id; voxel block: the mask's low half.
     pub id: u32,
     /// Must be 0.
     pub reserved: u32,
@@ -283,7 +293,12 @@ impl MapRequest {
                 }
                 let deltas = decode_deltas(records)?;
                 if let Some(i) = deltas.iter().position(|d| {
-                    !matches!(d, MapDelta::UpsertObstacle { .. } | MapDelta::SetVoxels { occupied: true, .. })
+                    !matches!(
+                        d,
+                        MapDelta::UpsertObstacle { .. }
+                            | MapDelta::SetVoxels { occupied: true, .. }
+                            | MapDelta::SetVoxelBlocks { occupied: true, .. }
+                    )
                 }) {
                     return Err(Rejection::at_delta(
                         Status::MalformedDelta,
@@ -386,6 +401,7 @@ impl MapRequest {
 pub fn record_count(delta: &MapDelta) -> usize {
     match delta {
         MapDelta::SetVoxels { cells, .. } => 1 + cells.len(),
+        MapDelta::SetVoxelBlocks { blocks, .. } => 1 + blocks.len(),
         _ => 1,
     }
 }
@@ -414,6 +430,21 @@ fn push_delta(out: &mut Vec<WireDelta>, delta: &MapDelta) {
             r.cell[0] = cells.len() as i64;
             out.push(r);
             out.extend(cells.iter().map(|c| WireDelta { tag: tag::VOXEL_CELL, cell: *c, ..Default::default() }));
+            return;
+        }
+        MapDelta::SetVoxelBlocks { resolution, origin, blocks, occupied } => {
+            r.tag = tag::VOXEL_BLOCK_RUN;
+            r.flag = u32::from(*occupied);
+            r.values[..4].copy_from_slice(&[*resolution, origin.x, origin.y, origin.z]);
+            r.cell[0] = blocks.len() as i64;
+            out.push(r);
+            out.extend(blocks.iter().map(|b| WireDelta {
+                tag: tag::VOXEL_BLOCK,
+                id: b.mask as u32,
+                flag: (b.mask >> 32) as u32,
+                cell: b.min,
+                ..Default::default()
+            }));
             return;
         }
         MapDelta::SetSun(s) => {
@@ -451,7 +482,7 @@ pub fn decode_deltas(records: &[WireDelta]) -> Result<Vec<MapDelta>, Rejection> 
         if r.reserved != 0 {
             return Err(bad(format!("record {i}: reserved = {} must be 0", r.reserved)));
         }
-        if r.tag != tag::VOXEL_RUN && r.flag != 0 {
+        if r.tag != tag::VOXEL_RUN && r.tag != tag::VOXEL_BLOCK_RUN && r.flag != 0 {
             return Err(bad(format!("record {i}: flag = {} must be 0 for tag {}", r.flag, r.tag)));
         }
         let v = r.values;
@@ -472,7 +503,7 @@ pub fn decode_deltas(records: &[WireDelta]) -> Result<Vec<MapDelta>, Rejection> 
                 }),
             },
             tag::REMOVE_OBSTACLE => MapDelta::RemoveObstacle { id: r.id },
-            tag::VOXEL_RUN => {
+            tag::VOXEL_RUN | tag::VOXEL_BLOCK_RUN => {
                 let occupied = match r.flag {
                     0 => false,
                     1 => true,
@@ -480,31 +511,44 @@ pub fn decode_deltas(records: &[WireDelta]) -> Result<Vec<MapDelta>, Rejection> 
                 };
                 let remaining = (records.len() - i - 1) as i64;
                 let n = r.cell[0];
+                let (what, item) =
+                    if r.tag == tag::VOXEL_RUN { ("cell", tag::VOXEL_CELL) } else { ("block", tag::VOXEL_BLOCK) };
                 if !(0..=remaining).contains(&n) {
                     return Err(bad(format!(
-                        "record {i}: voxel run of {n} cells, but {remaining} records follow (truncated run)"
+                        "record {i}: voxel run of {n} {what}s, but {remaining} records follow (truncated run)"
                     )));
                 }
-                let cells = &records[i + 1..i + 1 + n as usize];
-                if let Some(k) = cells.iter().position(|c| c.tag != tag::VOXEL_CELL || c.flag != 0 || c.reserved != 0) {
-                    return Err(bad(format!("record {}: expected a voxel cell record of the run at {i}", i + 1 + k)));
+                let items = &records[i + 1..i + 1 + n as usize];
+                let stray =
+                    |c: &WireDelta| c.tag != item || c.reserved != 0 || (item == tag::VOXEL_CELL && c.flag != 0);
+                if let Some(k) = items.iter().position(stray) {
+                    return Err(bad(format!("record {}: expected a voxel {what} record of the run at {i}", i + 1 + k)));
                 }
-                out.push(MapDelta::SetVoxels {
-                    resolution: v[0],
-                    origin: Point3::new(v[1], v[2], v[3]),
-                    cells: cells.iter().map(|c| c.cell).collect(),
-                    occupied,
+                let (resolution, origin) = (v[0], Point3::new(v[1], v[2], v[3]));
+                out.push(if item == tag::VOXEL_CELL {
+                    MapDelta::SetVoxels { resolution, origin, cells: items.iter().map(|c| c.cell).collect(), occupied }
+                } else {
+                    let blocks = items
+                        .iter()
+                        .map(|b| VoxelBlock { min: b.cell, mask: u64::from(b.flag) << 32 | u64::from(b.id) })
+                        .collect();
+                    MapDelta::SetVoxelBlocks { resolution, origin, blocks, occupied }
                 });
                 i += 1 + n as usize;
                 continue;
             }
+            tag::VOXEL_BLOCK => return Err(bad(format!("record {i}: voxel block outside a block run"))),
             tag::VOXEL_CELL => return Err(bad(format!("record {i}: voxel cell outside a run"))),
             tag::SET_SUN => MapDelta::SetSun(Sun { elevation: v[0], azimuth: v[1] }),
             tag::SET_BOUNDS => {
                 MapDelta::SetBounds(Bounds { min: Point2::new(v[0], v[1]), max: Point2::new(v[2], v[3]) })
             }
             tag::CLEAR => MapDelta::Clear,
-            t => return Err(bad(format!("record {i}: tag = {t} is not a delta (1 upsert cylinder .. 8 clear)"))),
+            t => {
+                return Err(bad(format!(
+                    "record {i}: tag = {t} is not a delta (1 upsert cylinder .. 9 voxel block run)"
+                )));
+            }
         };
         out.push(delta);
         i += 1;
@@ -526,22 +570,20 @@ pub fn world_chunks(world: &World) -> Vec<Vec<WireDelta>> {
         push_delta(chunks.last_mut().expect("one chunk"), &MapDelta::UpsertObstacle { id: *id, obstacle: *obstacle });
     }
     if let Some(grid) = world.voxels() {
-        let cells: Vec<_> = grid.occupied().copied().collect();
-        let mut rest = &cells[..];
+        let mut blocks = grid.blocks().peekable();
         // A grid with no cells still carries its resolution and origin.
         loop {
-            room(&mut chunks, 2.min(1 + rest.len()));
+            room(&mut chunks, 2.min(1 + usize::from(blocks.peek().is_some())));
             let chunk = chunks.last_mut().expect("one chunk");
-            let take = rest.len().min(MAX_DELTAS_PER_MESSAGE - chunk.len() - 1);
-            let run = MapDelta::SetVoxels {
+            let take = MAX_DELTAS_PER_MESSAGE - chunk.len() - 1;
+            let run = MapDelta::SetVoxelBlocks {
                 resolution: grid.resolution(),
                 origin: grid.origin(),
-                cells: rest[..take].to_vec(),
+                blocks: blocks.by_ref().take(take).collect(),
                 occupied: true,
             };
             push_delta(chunk, &run);
-            rest = &rest[take..];
-            if rest.is_empty() {
+            if blocks.peek().is_none() {
                 break;
             }
         }
@@ -561,15 +603,22 @@ pub fn world_from_content(
     // rebuild the grid once per chunk.
     let mut merged: Vec<MapDelta> = Vec::with_capacity(deltas.len());
     for d in deltas {
-        if let (
-            Some(MapDelta::SetVoxels { resolution: r0, origin: o0, cells: c0, occupied: true }),
-            MapDelta::SetVoxels { resolution, origin, cells, occupied: true },
-        ) = (merged.last_mut(), d)
-            && r0.to_bits() == resolution.to_bits()
-            && o0 == origin
-        {
-            c0.extend_from_slice(cells);
-            continue;
+        match (merged.last_mut(), d) {
+            (
+                Some(MapDelta::SetVoxels { resolution: r0, origin: o0, cells: c0, occupied: true }),
+                MapDelta::SetVoxels { resolution, origin, cells, occupied: true },
+            ) if r0.to_bits() == resolution.to_bits() && o0 == origin => {
+                c0.extend_from_slice(cells);
+                continue;
+            }
+            (
+                Some(MapDelta::SetVoxelBlocks { resolution: r0, origin: o0, blocks: b0, occupied: true }),
+                MapDelta::SetVoxelBlocks { resolution, origin, blocks, occupied: true },
+            ) if r0.to_bits() == resolution.to_bits() && o0 == origin => {
+                b0.extend_from_slice(blocks);
+                continue;
+            }
+            _ => {}
         }
         merged.push(d.clone());
     }

@@ -1,6 +1,6 @@
 //! Map deltas (SPEC §1): the only way a map changes.
 
-use super::voxels::CellIndex;
+use super::voxels::{CellIndex, VoxelBlock};
 use super::{Bounds, BoundsError, Obstacle, ObstacleError, Sun, SunError, VoxelError, VoxelGrid, World};
 use crate::limits::MAX_OBSTACLES;
 use crate::math::Point3;
@@ -30,6 +30,19 @@ pub enum MapDelta {
         origin: Point3<f64>,
         /// The cells to set.
         cells: Vec<CellIndex>,
+        /// Occupied or free.
+        occupied: bool,
+    },
+    /// Mark the cells of 4³ blocks occupied (`occupied = true`) or free: the compact
+    /// form of `SetVoxels` for large updates, uploads and snapshots. The same grid
+    /// rules as `SetVoxels`.
+    SetVoxelBlocks {
+        /// Cell side, m.
+        resolution: f64,
+        /// Minimum corner of cell (0, 0, 0).
+        origin: Point3<f64>,
+        /// The blocks; cells outside a block's mask are untouched.
+        blocks: Vec<VoxelBlock>,
         /// Occupied or free.
         occupied: bool,
     },
@@ -139,23 +152,10 @@ fn apply_one(
             obstacles.remove(id).ok_or(MapDeltaErrorKind::UnknownObstacle { id: *id })?;
         }
         MapDelta::SetVoxels { resolution, origin, cells, occupied } => {
-            let grid = match voxels.take() {
-                Some(grid) if grid.resolution() == *resolution && grid.origin() == *origin => grid,
-                Some(grid) => {
-                    let mismatch = MapDeltaErrorKind::VoxelGridMismatch {
-                        have_resolution: grid.resolution(),
-                        have_origin: grid.origin().coords.into(),
-                        resolution: *resolution,
-                        origin: origin.coords.into(),
-                    };
-                    *voxels = Some(grid);
-                    return Err(mismatch);
-                }
-                None => VoxelGrid::new(*resolution, *origin, [])?,
-            };
-            let updated = grid.with_cells(cells, *occupied);
-            *voxels = Some(grid);
-            *voxels = Some(updated?);
+            edit_grid(voxels, *resolution, origin, |grid| grid.with_cells(cells, *occupied))?;
+        }
+        MapDelta::SetVoxelBlocks { resolution, origin, blocks, occupied } => {
+            edit_grid(voxels, *resolution, origin, |grid| grid.with_blocks(blocks, *occupied))?;
         }
         MapDelta::SetSun(s) => *sun = Sun::new(s.elevation, s.azimuth)?,
         MapDelta::SetBounds(b) => *bounds = Bounds::new(b.to_array())?,
@@ -164,6 +164,30 @@ fn apply_one(
             *voxels = None;
         }
     }
+    Ok(())
+}
+
+/// Applies `edit` to the map's grid (created empty by the first voxel delta),
+/// after checking the delta names the grid's resolution and origin.
+fn edit_grid(
+    voxels: &mut Option<VoxelGrid>,
+    resolution: f64,
+    origin: &Point3<f64>,
+    edit: impl FnOnce(&VoxelGrid) -> Result<VoxelGrid, VoxelError>,
+) -> Result<(), MapDeltaErrorKind> {
+    let updated = match voxels {
+        Some(grid) if grid.resolution() == resolution && grid.origin() == *origin => edit(grid)?,
+        Some(grid) => {
+            return Err(MapDeltaErrorKind::VoxelGridMismatch {
+                have_resolution: grid.resolution(),
+                have_origin: grid.origin().coords.into(),
+                resolution,
+                origin: origin.coords.into(),
+            });
+        }
+        None => edit(&VoxelGrid::empty(resolution, *origin)?)?,
+    };
+    *voxels = Some(updated);
     Ok(())
 }
 
@@ -206,7 +230,7 @@ mod tests {
         assert_eq!(w.version(), 6);
         assert_eq!(w.obstacles().len(), 1);
         assert_eq!(w.obstacles()[&1], pole(3.0));
-        assert_eq!(w.voxels().unwrap().occupied().copied().collect::<Vec<_>>(), vec![[1, 0, 0]]);
+        assert_eq!(w.voxels().unwrap().cells_sorted(), vec![[1, 0, 0]]);
         let cleared = w.apply(&[MapDelta::Clear]).unwrap();
         assert!(cleared.obstacles().is_empty() && cleared.voxels().is_none());
         assert_eq!(cleared.version(), 7);

@@ -28,7 +28,7 @@ mod voxels;
 pub use delta::{MapDelta, MapDeltaError, MapDeltaErrorKind};
 pub use obstacle::{AxisBox, Obstacle, ObstacleError, VerticalCylinder};
 pub use segment::{Segment, SegmentEnd};
-pub use voxels::{CellIndex, VoxelError, VoxelGrid};
+pub use voxels::{CellIndex, VoxelBlock, VoxelError, VoxelGrid};
 
 use crate::limits::{MAX_COORDINATE, MAX_OBSTACLES};
 use crate::math::{Point2, Point3, Vector3};
@@ -264,7 +264,7 @@ impl World {
             out["voxels"] = serde_json::json!({
                 "resolution": v.resolution(),
                 "origin": <[f64; 3]>::from(v.origin().coords),
-                "occupied": v.occupied().collect::<Vec<_>>(),
+                "occupied": v.cells_sorted(),
             });
         }
         out
@@ -283,13 +283,8 @@ impl World {
     /// the map id a scenario's map gets when none is given, so the same scenario
     /// reuses its map in the daemon.
     pub fn content_id(&self) -> u64 {
-        let text = format!(
-            "{:?}{:?}{:?}{:?}",
-            self.bounds,
-            self.sun,
-            self.obstacles,
-            self.voxels.as_ref().map(|v| (v.resolution(), v.origin(), v.occupied().copied().collect::<Vec<_>>()))
-        );
+        let voxels = self.voxels.as_ref().map(VoxelGrid::digest);
+        let text = format!("{:?}{:?}{:?}{:?}", self.bounds, self.sun, self.obstacles, voxels);
         // FNV-1a, 64 bit.
         text.bytes().fold(0xcbf29ce484222325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x100000001b3))
     }

@@ -144,9 +144,9 @@ impl Octomap {
     pub fn to_voxels(&self, origin: crate::math::Point3<f64>) -> Result<crate::world::VoxelGrid, VoxelError> {
         let count = self.cell_count();
         if count > crate::limits::MAX_OCCUPIED_VOXELS as u64 {
-            return Err(VoxelError::TooManyCells { count: usize::try_from(count).unwrap_or(usize::MAX) });
+            return Err(VoxelError::TooManyCells { count });
         }
-        crate::world::VoxelGrid::new(self.resolution, origin, self.occupied.iter().flat_map(OccupiedCube::cells))
+        crate::world::VoxelGrid::from_cubes(self.resolution, origin, self.occupied.iter().map(|c| (c.min, c.side)))
     }
 }
 

@@ -236,7 +236,7 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
             let Some(voxels) = world.voxels() else {
                 return Err(Failure::invalid(anyhow!("map {id} has no voxels to write as an OctoMap")));
             };
-            let bytes = dyfos_shared::world::octomap::write_bt(voxels.resolution(), voxels.occupied().copied())
+            let bytes = dyfos_shared::world::octomap::write_bt(voxels.resolution(), voxels.cells())
                 .map_err(Failure::invalid)?;
             std::fs::write(file, bytes).map_err(|e| anyhow!("cannot write {}: {e}", file.display()))?;
             // A .bt holds cells by key only: the origin, and any cylinders and boxes,
@@ -245,7 +245,7 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
                 "map": id,
                 "version": world.version(),
                 "bt": file,
-                "cells": voxels.occupied().len(),
+                "cells": voxels.len(),
                 "resolution": voxels.resolution(),
                 "origin": <[f64; 3]>::from(voxels.origin().coords),
                 "obstacles_not_written": world.obstacles().len(),

@@ -1,0 +1,187 @@
+//! The exact first contact of a segment with the occupied closed cells, walking the
+//! tree level by level.
+//!
+//! At each level (64³ blocks, 8³ bricks, cells) the segment walks the grid of that
+//! level cell by cell (Amanatides & Woo). Because cells are closed, a segment running
+//! exactly along a face or through an edge also touches the neighbours there, and the
+//! walk checks those too. A touched block that holds occupied cells is walked at the
+//! next level, over the part of the segment inside it; an empty one is passed in one
+//! step. Every contact found is a real one, and the cell of the first contact is
+//! reached through the blocks that contain it, so the smallest contact found is the
+//! first: the answer is the one a walk over every cell would give.
+
+use super::CellIndex;
+use super::tree::{BRICK_SHIFT, NODE_SHIFT, Tree};
+use crate::math::Point3;
+use crate::world::segment::{Segment, clip_slab};
+
+/// One query: the tree, the grid's placement and the segment.
+pub(super) struct Walk<'a> {
+    pub(super) tree: &'a Tree,
+    pub(super) resolution: f64,
+    pub(super) origin: Point3<f64>,
+    pub(super) seg: &'a Segment,
+    /// The occupied cells' bounding box: minimum cell, one past the maximum.
+    pub(super) lo: CellIndex,
+    pub(super) end: CellIndex,
+}
+
+/// The coarsest level: 64³ blocks (the tree's nodes).
+pub(super) const TOP: u32 = 2;
+
+impl Walk<'_> {
+    /// log2 of a level's cell side, in cells.
+    #[inline]
+    fn shift(level: u32) -> u32 {
+        match level {
+            0 => 0,
+            1 => BRICK_SHIFT,
+            _ => NODE_SHIFT,
+        }
+    }
+
+    #[inline]
+    fn occupied(&self, level: u32, c: CellIndex) -> bool {
+        match level {
+            0 => self.tree.get(c),
+            1 => self.tree.has_brick(c),
+            _ => self.tree.has_node(c),
+        }
+    }
+
+    /// Walks `level` over `[t0, t1]`, lowering `best` to any contact found before it.
+    pub(super) fn walk(&self, level: u32, t0: f64, t1: f64, best: &mut f64) {
+        let shift = Self::shift(level);
+        let size = self.resolution * f64::from(1u32 << shift);
+        let seg = self.seg;
+        // Grid coordinates, in this level's cells.
+        let g = |t: f64, a: usize| (seg.origin[a] + seg.dir[a] * t - self.origin[a]) / size;
+        let box_lo: CellIndex = self.lo.map(|v| v >> shift);
+        let box_end: CellIndex = self.end.map(|v| ((v - 1) >> shift) + 1);
+        let mut cell = [0i64; 3];
+        let mut step = [0i64; 3];
+        let mut t_max = [f64::INFINITY; 3];
+        let mut t_delta = [f64::INFINITY; 3];
+        // Axes along which the segment lies exactly on a cell boundary: there the
+        // closed cells on both sides are touched.
+        let mut twin = [false; 3];
+        // The walk never leaves the box (plus the layer of cells touching it): entry
+        // coordinates are clamped into it and the walk ends when it steps out. With
+        // cells far smaller than the float spacing of `t` (or of the entry point),
+        // rounding could otherwise start the walk far outside, or stall `t` while the
+        // cells advance forever.
+        for a in 0..3 {
+            // Snap entry points within 1e-9 cells of a plane onto it, so rounding in
+            // the clip does not decide whether a face or edge is touched.
+            let raw = g(t0, a).clamp((box_lo[a] - 1) as f64, box_end[a] as f64);
+            let ga = if (raw - raw.round()).abs() < 1e-9 { raw.round() } else { raw };
+            let fa = ga.floor();
+            cell[a] = fa as i64;
+            let on_plane = ga == fa;
+            let d = seg.dir[a];
+            if d > 0.0 {
+                step[a] = 1;
+                t_delta[a] = size / d;
+                t_max[a] = t0 + (fa + 1.0 - ga) * size / d;
+                twin[a] = on_plane; // the cell behind touches the entry point
+            } else if d < 0.0 {
+                step[a] = -1;
+                t_delta[a] = -size / d;
+                // On a plane moving down, the current (upper) cell touches only at
+                // entry; the walk steps down at t0 itself.
+                t_max[a] = t0 + (ga - fa) * size / -d;
+            } else {
+                twin[a] = on_plane;
+            }
+        }
+        self.visit(level, cell, &twin, [false; 3], &step, t0, t1, best);
+        if *best <= t0 {
+            return;
+        }
+        // `t1` comes from a clip, `t_next` from sums of steps: a contact exactly at
+        // `t1` (a corner where the segment leaves the box) may come out a few ulps
+        // after it. Walk on for 1e-9 cells, as entry points snap within 1e-9 cells.
+        let slack = 1e-9 * size;
+        loop {
+            let t_next = t_max[0].min(t_max[1]).min(t_max[2]);
+            if t_next.is_nan() || t_next > t1 + slack || t_next > *best {
+                return;
+            }
+            // Every axis whose boundary is crossed at t_next steps together; the cells
+            // reached by stepping any subset of them touch the segment at t_next.
+            let tied = [t_max[0] == t_next, t_max[1] == t_next, t_max[2] == t_next];
+            // Stepping further out of the box reaches no cell that touches it.
+            if (0..3)
+                .any(|a| tied[a] && ((step[a] > 0 && cell[a] >= box_end[a]) || (step[a] < 0 && cell[a] < box_lo[a])))
+            {
+                return;
+            }
+            for a in 0..3 {
+                if tied[a] {
+                    cell[a] += step[a];
+                    t_max[a] += t_delta[a];
+                }
+            }
+            // Twins on moving axes touch only the start point, so they count while the
+            // walk is still there (several axes can step at t0 itself).
+            let at_start = t_next <= t0;
+            let still: [bool; 3] = std::array::from_fn(|a| twin[a] && (step[a] == 0 || at_start));
+            let t = t_next.max(t0);
+            self.visit(level, cell, &still, tied, &step, t, t1, best);
+            if *best <= t {
+                return;
+            }
+        }
+    }
+
+    /// Checks `cell` and the cells reached from it by un-stepping any subset of the
+    /// `tied` axes or moving to the lower twin on `twin` axes, all touched at `t`: a
+    /// contact at the finest level, a walk of the next level inside a coarser one.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn visit(
+        &self,
+        level: u32,
+        cell: CellIndex,
+        twin: &[bool; 3],
+        tied: [bool; 3],
+        step: &[i64; 3],
+        t: f64,
+        t1: f64,
+        best: &mut f64,
+    ) {
+        let movable = (0..3).fold(0u8, |m, a| m | u8::from(tied[a] || twin[a]) << a);
+        for mask in 0u8..8 {
+            if mask & !movable != 0 {
+                continue;
+            }
+            let mut c = cell;
+            for a in 0..3 {
+                if mask >> a & 1 == 1 {
+                    c[a] -= if tied[a] { step[a] } else { 1 };
+                }
+            }
+            if !self.occupied(level, c) {
+                continue;
+            }
+            if level == 0 {
+                *best = best.min(t.min(t1));
+                return;
+            }
+            if t > *best {
+                return;
+            }
+            // The part of the segment inside the block: from where it touched it to
+            // where it leaves (at least `t`, so a graze is still walked).
+            let size = self.resolution * f64::from(1u32 << Self::shift(level));
+            let (mut ta, mut tb) = (t, t1);
+            let mut inside = true;
+            for a in 0..3 {
+                let lo = self.origin[a] + c[a] as f64 * size;
+                inside &= clip_slab(self.seg.origin[a], self.seg.dir[a], lo, lo + size, &mut ta, &mut tb);
+            }
+            let exit = if inside { tb.max(t) } else { t };
+            self.walk(level - 1, t, exit.min(t1).min(*best), best);
+        }
+    }
+}
