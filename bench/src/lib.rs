@@ -8,6 +8,7 @@
 //! - [`latency`]: the request mix, drivers, in-process baseline and iceoryx2 floor of
 //!   `dyfos-bench latency`;
 //! - [`learned`]: the learned SDSMM against the synthetic camera it was trained on;
+//! - [`octomap`]: a synthetic OctoMap building of any size, for load/update/query figures;
 //! - [`scaling`]: `dyfos` query time as the map grows;
 //! - [`stats`], [`svg`]: summaries and plots for the reports.
 //!
@@ -25,6 +26,7 @@ pub mod evaluation;
 pub mod latency;
 pub mod learned;
 pub mod numerical;
+pub mod octomap;
 pub mod scaling;
 pub mod stats;
 pub mod svg;

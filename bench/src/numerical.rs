@@ -14,7 +14,7 @@
 //! assert_ne!(map, numerical_map(42, 1, &config));
 //! // The same area as a 0.1 m occupancy grid, obstacles rasterized into cells.
 //! let grid = voxelized(&map, 0.1).unwrap();
-//! assert!(grid.world.obstacles().is_empty() && grid.world.voxels().unwrap().occupied().len() > 10_000);
+//! assert!(grid.world.obstacles().is_empty() && grid.world.voxels().unwrap().len() > 10_000);
 //! ```
 //!
 //! What is drawn, in this order (SPEC §10, for `NumericalConfig::paper()`):

@@ -8,6 +8,7 @@
 mod latency;
 mod learned;
 mod numerical;
+mod octomap;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -28,6 +29,9 @@ enum Command {
     /// Query latency and throughput of dyfosd (closed and open loop, N client
     /// processes), against the in-process call and iceoryx2's raw round trip.
     Latency(latency::LatencyArgs),
+    /// OctoMap maps (issue 13): query cost per candidate against cylinder maps, and,
+    /// through dyfosd, loading a building `.bt`, 10 000-cell updates, a restart.
+    Octomap(octomap::OctomapArgs),
     /// One client process of `latency` (started by it).
     #[command(hide = true)]
     LatencyWorker(latency::WorkerArgs),
@@ -42,6 +46,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Latency(args) => latency::run(&args),
         Command::LatencyWorker(args) => latency::worker(&args),
         Command::Learned(args) => learned::run(&args),
+        Command::Octomap(args) => octomap::run(&args),
     }
 }
 
