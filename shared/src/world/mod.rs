@@ -332,6 +332,15 @@ impl World {
         if overflow {
             return segments.iter().any(|s| self.segment_contact(s));
         }
+        // The grid's leaf spans the whole grid: drop it when no occupied cell is near
+        // the batch at all (a viewer's collision star in open space).
+        if let (Some(v), Some(i)) =
+            (&self.voxels, near[..count].iter().position(|l| matches!(self.leaves[*l as usize], Leaf::Voxels)))
+            && !v.may_touch_box(&lo, &hi)
+        {
+            near.copy_within(i + 1..count, i);
+            count -= 1;
+        }
         segments
             .iter()
             .any(|s| near[..count].iter().any(|leaf| self.leaf_contact(*leaf, s).is_some_and(|t| s.reaches(t))))

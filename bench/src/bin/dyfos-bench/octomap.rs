@@ -67,12 +67,11 @@ pub fn run(args: &OctomapArgs) -> anyhow::Result<()> {
 /// A scenario looking at the building: the rover in room (1, 1), the viewer's
 /// bounds the building's.
 fn building_scenario(building: &Building, world: World) -> anyhow::Result<Scenario> {
-    let template = numerical_map(1, 0, &NumericalConfig::paper());
     let rover = building.room_centre(1, 1, 0.3);
     let belief = Belief::new(rover, [[0.04, 0.0, 0.0], [0.0, 0.04, 0.0], [0.0, 0.0, 0.02]])?;
-    let mut params = template.params;
+    let mut params = numerical_map(1, 0, &NumericalConfig::paper()).params;
     params.z_max = 2.4;
-    Ok(Scenario { world, belief, params, ..template })
+    Ok(Scenario { world, belief, params })
 }
 
 fn building_world(building: &Building) -> anyhow::Result<World> {
@@ -88,7 +87,8 @@ fn query_costs(args: &OctomapArgs) -> anyhow::Result<String> {
     let n = args.queries.max(1);
     let contender = [Contender::algorithm(Algorithm::Dyfos, 1)];
     let cylinders: Vec<Scenario> = (0..n as u64).map(|i| numerical_map(1, i, &NumericalConfig::paper())).collect();
-    let mut rows: Vec<(String, u64, Vec<Scenario>)> = vec![("25 cylinders (SPEC §10 maps)".into(), 0, cylinders.clone())];
+    let mut rows: Vec<(String, u64, Vec<Scenario>)> =
+        vec![("25 cylinders (SPEC §10 maps)".into(), 0, cylinders.clone())];
     for r in [0.1, 0.05] {
         let grids: Vec<Scenario> = cylinders.iter().map(|s| voxelized(s, r)).collect::<Result<_, _>>()?;
         let cells = grids.iter().map(|g| g.world.voxels().map_or(0, |v| v.len())).max().unwrap_or(0);
@@ -97,7 +97,8 @@ fn query_costs(args: &OctomapArgs) -> anyhow::Result<String> {
     for path in &args.scenario {
         let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
         let base = path.parent().unwrap_or(Path::new("."));
-        let scenario = Scenario::from_json_with_files(&text, |f| std::fs::read(base.join(f)).map_err(|e| e.to_string()))?;
+        let scenario =
+            Scenario::from_json_with_files(&text, |f| std::fs::read(base.join(f)).map_err(|e| e.to_string()))?;
         let cells = scenario.world.voxels().map_or(0, |v| v.len());
         rows.push((format!("OctoMap {}", path.display()), cells, vec![scenario; n]));
     }
@@ -105,7 +106,11 @@ fn query_costs(args: &OctomapArgs) -> anyhow::Result<String> {
     let world = building_world(&building)?;
     let cells = world.voxels().map_or(0, |v| v.len());
     let side = building.side as f64 * RESOLUTION;
-    rows.push((format!("building {side:.0} × {side:.0} m, 0.05 m"), cells, vec![building_scenario(&building, world)?; n]));
+    rows.push((
+        format!("building {side:.0} × {side:.0} m, 0.05 m"),
+        cells,
+        vec![building_scenario(&building, world)?; n],
+    ));
 
     let mut out = format!(
         "### `dyfos` query cost per candidate, in process, one thread ({n} queries a map, seeds 1..={n})\n\n\
@@ -358,5 +363,6 @@ fn quantile(values: &[f64], p: f64) -> f64 {
 }
 
 fn load_average() -> String {
-    std::fs::read_to_string("/proc/loadavg").map_or("?".into(), |s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+    std::fs::read_to_string("/proc/loadavg")
+        .map_or("?".into(), |s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
 }

@@ -334,6 +334,36 @@ impl VoxelGrid {
         Some((corner(lo), corner(end)))
     }
 
+    /// Whether a segment inside the closed box `[lo, hi]` may touch an occupied cell:
+    /// `false` only when no cell whose closed cube meets the box is occupied (a cheap
+    /// broad phase for a batch of segments, e.g. a viewer's collision star).
+    pub fn may_touch_box(&self, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+        self.may_touch_box_within(lo, hi, 512)
+    }
+
+    /// [`VoxelGrid::may_touch_box`] with at most `budget` node and brick lookups.
+    fn may_touch_box_within(&self, lo: &Point3<f64>, hi: &Point3<f64>, budget: u32) -> bool {
+        let Some((cells_lo, cells_end)) = self.tree.bounds() else {
+            return false;
+        };
+        let mut first = [0i64; 3];
+        let mut last = [0i64; 3];
+        for a in 0..3 {
+            // Cells whose closed cube meets [lo, hi], one more on each side for rounding.
+            let f = ((lo[a] - self.origin[a]) / self.resolution).floor() - 2.0;
+            let l = ((hi[a] - self.origin[a]) / self.resolution).floor() + 1.0;
+            if !(f.is_finite() && l.is_finite()) {
+                return true;
+            }
+            first[a] = (f.max((cells_lo[a] - 1) as f64)) as i64;
+            last[a] = (l.min(cells_end[a] as f64)) as i64;
+            if first[a] > last[a] {
+                return false;
+            }
+        }
+        self.tree.any_in_box(first, last, budget) != Some(false)
+    }
+
     /// The smallest `t ∈ [0, seg.length]` at which the segment touches an occupied
     /// closed cell, or `None`. The segment's `end` is not applied. Allocates nothing.
     pub fn first_contact(&self, seg: &Segment) -> Option<f64> {
@@ -345,9 +375,17 @@ impl VoxelGrid {
                 return None;
             }
         }
-        let walk = walk::Walk { tree: &self.tree, resolution: self.resolution, origin: self.origin, seg, lo, end };
+        // A short segment in an empty neighbourhood (most of a collision star) is
+        // settled by a few lookups of its box, without a walk.
+        if t1 - t0 < 16.0 * self.resolution {
+            let (a, b) = (seg.point_at(t0), seg.point_at(t1));
+            if !self.may_touch_box_within(&a.inf(&b), &a.sup(&b), 16) {
+                return None;
+            }
+        }
+        let walk = walk::Walk::new(&self.tree, self.resolution, self.origin, seg, lo, end);
         let mut best = f64::INFINITY;
-        walk.walk(walk::TOP, t0, t1, &mut best);
+        walk.walk::<{ walk::TOP }>(t0, t1, &mut best);
         best.is_finite().then_some(best)
     }
 }
@@ -514,6 +552,39 @@ mod tests {
             a.with_blocks(&[VoxelBlock { min: [1, 0, 0], mask: 1 }], true),
             Err(VoxelError::MisalignedBlock { .. })
         ));
+    }
+
+    /// The broad phase never calls a box empty that a cell touches, and its exact
+    /// answer (within budget) is the brute one.
+    #[test]
+    fn box_queries_agree_with_every_cell() {
+        let mut rng = Lcg(17);
+        let cells: Vec<CellIndex> = (0..400)
+            .map(|_| [(rng.next() * 200.0) as i64 - 100, (rng.next() * 200.0) as i64 - 100, (rng.next() * 20.0) as i64])
+            .collect();
+        let grid = VoxelGrid::new(0.125, Point3::new(1.0, -2.0, 0.5), cells.iter().copied()).unwrap();
+        let (mut empty, mut full) = (0, 0);
+        for _ in 0..3000 {
+            let lo =
+                [(rng.next() * 220.0) as i64 - 110, (rng.next() * 220.0) as i64 - 110, (rng.next() * 24.0) as i64 - 2];
+            let size = [(rng.next() * 12.0) as i64, (rng.next() * 12.0) as i64, (rng.next() * 6.0) as i64];
+            let hi = [lo[0] + size[0], lo[1] + size[1], lo[2] + size[2]];
+            let brute = cells.iter().any(|c| (0..3).all(|a| lo[a] <= c[a] && c[a] <= hi[a]));
+            if let Some(found) = grid.tree.any_in_box(lo, hi, 10_000) {
+                assert_eq!(found, brute, "{lo:?}..={hi:?}");
+            }
+            // The same box in metres, touching the cells' faces exactly.
+            let corner = |c: [i64; 3]| grid.origin() + Vector3::from(c.map(|v| v as f64)) * grid.resolution();
+            let (blo, bhi) = (corner(lo), corner(hi.map(|v| v + 1)));
+            let touched = cells.iter().any(|c| (0..3).all(|a| lo[a] - 1 <= c[a] && c[a] <= hi[a] + 1));
+            if !grid.may_touch_box(&blo, &bhi) {
+                assert!(!touched, "{lo:?}..={hi:?} called empty");
+                empty += 1;
+            } else {
+                full += usize::from(brute);
+            }
+        }
+        assert!(empty > 500 && full > 100, "{empty} empty, {full} full");
     }
 
     #[test]

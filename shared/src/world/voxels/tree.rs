@@ -24,6 +24,23 @@ pub(crate) type Bits = [u64; 8];
 /// An empty root slot.
 const EMPTY: u32 = u32::MAX;
 
+/// The bits (`8y + z`) of a brick word in the 4 × 4 quarter (y half, z half) =
+/// (i / 2, i % 2).
+const QUAD_MASKS: [u64; 4] = {
+    let mut masks = [0u64; 4];
+    let mut i = 0;
+    while i < 4 {
+        let (y0, z0) = ((i / 2) * 4, (i % 2) * 4);
+        let mut y = 0;
+        while y < 4 {
+            masks[i] |= 0xf << ((y0 + y) * 8 + z0);
+            y += 1;
+        }
+        i += 1;
+    }
+    masks
+};
+
 /// The bit of local cell (x, y, z), each in 0..8: (word, bit).
 #[inline]
 fn bit_of(x: i64, y: i64, z: i64) -> (usize, u32) {
@@ -187,6 +204,58 @@ impl Tree {
     pub(super) fn has_brick(&self, key: [i64; 3]) -> bool {
         self.node(key.map(|k| k >> (NODE_SHIFT - BRICK_SHIFT)))
             .is_some_and(|n| n.slots[slot_of(key[0] & 7, key[1] & 7, key[2] & 7)] != 0)
+    }
+
+    /// Whether the 4³ block with key `key` (cell index >> 2) holds an occupied cell.
+    #[inline]
+    pub(super) fn has_quad(&self, key: [i64; 3]) -> bool {
+        let Some(node) = self.node(key.map(|k| k >> (NODE_SHIFT - 2))) else {
+            return false;
+        };
+        let Some(bits) = node.brick(slot_of(key[0] >> 1 & 7, key[1] >> 1 & 7, key[2] >> 1 & 7)) else {
+            return false;
+        };
+        let x = ((key[0] & 1) * 4) as usize;
+        let words = bits[x] | bits[x + 1] | bits[x + 2] | bits[x + 3];
+        words & QUAD_MASKS[((key[1] & 1) * 2 + (key[2] & 1)) as usize] != 0
+    }
+
+    /// Whether an occupied cell lies in the cells `lo..=hi`: `Some(false)` proven
+    /// empty, `Some(true)` found, `None` when that would take more than `budget`
+    /// node and brick lookups.
+    pub(super) fn any_in_box(&self, lo: CellIndex, hi: CellIndex, mut budget: u32) -> Option<bool> {
+        let range = |shift: u32, a: usize| (lo[a] >> shift)..=(hi[a] >> shift);
+        for nx in range(NODE_SHIFT, 0) {
+            for ny in range(NODE_SHIFT, 1) {
+                for nz in range(NODE_SHIFT, 2) {
+                    budget = budget.checked_sub(1)?;
+                    let Some(node) = self.node([nx, ny, nz]) else { continue };
+                    // The bricks of this node inside the box.
+                    let clamp = |n: i64, a: usize| {
+                        let base = n << NODE_SHIFT;
+                        (lo[a].max(base), hi[a].min(base + (1 << NODE_SHIFT) - 1))
+                    };
+                    let (bx, by, bz) = (clamp(nx, 0), clamp(ny, 1), clamp(nz, 2));
+                    for x in (bx.0 >> 3)..=(bx.1 >> 3) {
+                        for y in (by.0 >> 3)..=(by.1 >> 3) {
+                            for z in (bz.0 >> 3)..=(bz.1 >> 3) {
+                                budget = budget.checked_sub(1)?;
+                                let Some(bits) = node.brick(slot_of(x & 7, y & 7, z & 7)) else { continue };
+                                // Cells of the brick inside the box: x words, y-z mask.
+                                let span = |v: i64, (l, h): (i64, i64)| ((l - v * 8).max(0), (h - v * 8).min(7));
+                                let ((x0, x1), (y0, y1), (z0, z1)) = (span(x, bx), span(y, by), span(z, bz));
+                                let zs: u64 = (0xffu64 >> (7 - z1 + z0)) << z0;
+                                let yz = (y0..=y1).fold(0u64, |m, yy| m | zs << (yy * 8));
+                                if (x0..=x1).any(|xx| bits[xx as usize] & yz != 0) {
+                                    return Some(true);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Some(false)
     }
 
     /// Whether cell `c` is occupied.

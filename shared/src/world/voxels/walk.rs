@@ -1,14 +1,16 @@
 //! The exact first contact of a segment with the occupied closed cells, walking the
 //! tree level by level.
 //!
-//! At each level (64³ blocks, 8³ bricks, cells) the segment walks the grid of that
-//! level cell by cell (Amanatides & Woo). Because cells are closed, a segment running
-//! exactly along a face or through an edge also touches the neighbours there, and the
-//! walk checks those too. A touched block that holds occupied cells is walked at the
-//! next level, over the part of the segment inside it; an empty one is passed in one
-//! step. Every contact found is a real one, and the cell of the first contact is
-//! reached through the blocks that contain it, so the smallest contact found is the
-//! first: the answer is the one a walk over every cell would give.
+//! At each level (64³ blocks, 8³ bricks, 4³ quads, cells) the segment walks the grid
+//! of that level cell by cell (Amanatides & Woo). Because cells are closed, a segment
+//! running exactly along a face or through an edge also touches the neighbours
+//! there, and the walk checks those too. A touched block that holds occupied cells
+//! is walked at the next level, over the part of the segment inside it; an empty one
+//! is passed in one step. Every contact found is a real one, and the cell of the
+//! first contact is reached through the blocks that contain it, so the smallest
+//! contact found is the first: the answer is the one a walk over every cell would
+//! give. The 4³ level is what lets a sight line pass just above a floor without
+//! walking its cells.
 
 use super::CellIndex;
 use super::tree::{BRICK_SHIFT, NODE_SHIFT, Tree};
@@ -17,45 +19,57 @@ use crate::world::segment::{Segment, clip_slab};
 
 /// One query: the tree, the grid's placement and the segment.
 pub(super) struct Walk<'a> {
-    pub(super) tree: &'a Tree,
-    pub(super) resolution: f64,
-    pub(super) origin: Point3<f64>,
-    pub(super) seg: &'a Segment,
+    tree: &'a Tree,
+    resolution: f64,
+    origin: Point3<f64>,
+    seg: &'a Segment,
     /// The occupied cells' bounding box: minimum cell, one past the maximum.
-    pub(super) lo: CellIndex,
-    pub(super) end: CellIndex,
+    lo: CellIndex,
+    end: CellIndex,
+    /// 1 / resolution and 1 / direction, once per segment rather than per level:
+    /// divisions are most of a short walk's cost.
+    inv_resolution: f64,
+    inv_dir: [f64; 3],
 }
 
-/// The coarsest level: 64³ blocks (the tree's nodes).
-pub(super) const TOP: u32 = 2;
+/// log2 of a level's cell side, in cells: cells, 4³ quads, 8³ bricks, 64³ nodes.
+const SHIFTS: [u32; 4] = [0, 2, BRICK_SHIFT, NODE_SHIFT];
 
-impl Walk<'_> {
-    /// log2 of a level's cell side, in cells.
-    #[inline]
-    fn shift(level: u32) -> u32 {
-        match level {
-            0 => 0,
-            1 => BRICK_SHIFT,
-            _ => NODE_SHIFT,
-        }
+/// The coarsest level.
+pub(super) const TOP: usize = 3;
+
+impl<'a> Walk<'a> {
+    pub(super) fn new(
+        tree: &'a Tree,
+        resolution: f64,
+        origin: Point3<f64>,
+        seg: &'a Segment,
+        lo: CellIndex,
+        end: CellIndex,
+    ) -> Self {
+        let inv_dir = [1.0 / seg.dir[0], 1.0 / seg.dir[1], 1.0 / seg.dir[2]];
+        Walk { tree, resolution, origin, seg, lo, end, inv_resolution: 1.0 / resolution, inv_dir }
     }
 
-    #[inline]
-    fn occupied(&self, level: u32, c: CellIndex) -> bool {
-        match level {
+    #[inline(always)]
+    fn occupied<const L: usize>(&self, c: CellIndex) -> bool {
+        match L {
             0 => self.tree.get(c),
-            1 => self.tree.has_brick(c),
+            1 => self.tree.has_quad(c),
+            2 => self.tree.has_brick(c),
             _ => self.tree.has_node(c),
         }
     }
 
-    /// Walks `level` over `[t0, t1]`, lowering `best` to any contact found before it.
-    pub(super) fn walk(&self, level: u32, t0: f64, t1: f64, best: &mut f64) {
-        let shift = Self::shift(level);
+    /// Walks level `L` over `[t0, t1]`, lowering `best` to any contact found before it.
+    pub(super) fn walk<const L: usize>(&self, t0: f64, t1: f64, best: &mut f64) {
+        let shift = SHIFTS[L];
         let size = self.resolution * f64::from(1u32 << shift);
+        // Powers of two: exact.
+        let inv_size = self.inv_resolution / f64::from(1u32 << shift);
         let seg = self.seg;
         // Grid coordinates, in this level's cells.
-        let g = |t: f64, a: usize| (seg.origin[a] + seg.dir[a] * t - self.origin[a]) / size;
+        let g = |t: f64, a: usize| (seg.origin[a] + seg.dir[a] * t - self.origin[a]) * inv_size;
         let box_lo: CellIndex = self.lo.map(|v| v >> shift);
         let box_end: CellIndex = self.end.map(|v| ((v - 1) >> shift) + 1);
         let mut cell = [0i64; 3];
@@ -79,22 +93,23 @@ impl Walk<'_> {
             cell[a] = fa as i64;
             let on_plane = ga == fa;
             let d = seg.dir[a];
+            let per_cell = size * self.inv_dir[a].abs();
             if d > 0.0 {
                 step[a] = 1;
-                t_delta[a] = size / d;
-                t_max[a] = t0 + (fa + 1.0 - ga) * size / d;
+                t_delta[a] = per_cell;
+                t_max[a] = t0 + (fa + 1.0 - ga) * per_cell;
                 twin[a] = on_plane; // the cell behind touches the entry point
             } else if d < 0.0 {
                 step[a] = -1;
-                t_delta[a] = -size / d;
+                t_delta[a] = per_cell;
                 // On a plane moving down, the current (upper) cell touches only at
                 // entry; the walk steps down at t0 itself.
-                t_max[a] = t0 + (ga - fa) * size / -d;
+                t_max[a] = t0 + (ga - fa) * per_cell;
             } else {
                 twin[a] = on_plane;
             }
         }
-        self.visit(level, cell, &twin, [false; 3], &step, t0, t1, best);
+        self.visit::<L>(cell, &twin, [false; 3], &step, t0, t1, best);
         if *best <= t0 {
             return;
         }
@@ -127,7 +142,7 @@ impl Walk<'_> {
             let at_start = t_next <= t0;
             let still: [bool; 3] = std::array::from_fn(|a| twin[a] && (step[a] == 0 || at_start));
             let t = t_next.max(t0);
-            self.visit(level, cell, &still, tied, &step, t, t1, best);
+            self.visit::<L>(cell, &still, tied, &step, t, t1, best);
             if *best <= t {
                 return;
             }
@@ -138,10 +153,9 @@ impl Walk<'_> {
     /// `tied` axes or moving to the lower twin on `twin` axes, all touched at `t`: a
     /// contact at the finest level, a walk of the next level inside a coarser one.
     #[allow(clippy::too_many_arguments)]
-    #[inline]
-    fn visit(
+    #[inline(always)]
+    fn visit<const L: usize>(
         &self,
-        level: u32,
         cell: CellIndex,
         twin: &[bool; 3],
         tied: [bool; 3],
@@ -150,9 +164,12 @@ impl Walk<'_> {
         t1: f64,
         best: &mut f64,
     ) {
-        let movable = (0..3).fold(0u8, |m, a| m | u8::from(tied[a] || twin[a]) << a);
+        let tied_mask = (0..3).fold(0u8, |m, a| m | u8::from(tied[a]) << a);
+        let movable = (0..3).fold(tied_mask, |m, a| m | u8::from(twin[a]) << a);
         for mask in 0u8..8 {
-            if mask & !movable != 0 {
+            // Un-stepping every tied axis (and nothing else) is the cell the walk just
+            // left: checked (or walked into) when it was reached.
+            if mask & !movable != 0 || (mask != 0 && mask == tied_mask) {
                 continue;
             }
             let mut c = cell;
@@ -161,10 +178,10 @@ impl Walk<'_> {
                     c[a] -= if tied[a] { step[a] } else { 1 };
                 }
             }
-            if !self.occupied(level, c) {
+            if !self.occupied::<L>(c) {
                 continue;
             }
-            if level == 0 {
+            if L == 0 {
                 *best = best.min(t.min(t1));
                 return;
             }
@@ -173,15 +190,20 @@ impl Walk<'_> {
             }
             // The part of the segment inside the block: from where it touched it to
             // where it leaves (at least `t`, so a graze is still walked).
-            let size = self.resolution * f64::from(1u32 << Self::shift(level));
+            let size = self.resolution * f64::from(1u32 << SHIFTS[L]);
             let (mut ta, mut tb) = (t, t1);
             let mut inside = true;
-            for a in 0..3 {
-                let lo = self.origin[a] + c[a] as f64 * size;
+            for (a, index) in c.iter().enumerate() {
+                let lo = self.origin[a] + *index as f64 * size;
                 inside &= clip_slab(self.seg.origin[a], self.seg.dir[a], lo, lo + size, &mut ta, &mut tb);
             }
             let exit = if inside { tb.max(t) } else { t };
-            self.walk(level - 1, t, exit.min(t1).min(*best), best);
+            let end = exit.min(t1).min(*best);
+            match L {
+                1 => self.walk::<0>(t, end, best),
+                2 => self.walk::<1>(t, end, best),
+                _ => self.walk::<2>(t, end, best),
+            }
         }
     }
 }
