@@ -458,6 +458,36 @@ impl Client {
         Ok(version)
     }
 
+    /// Uploads an OctoMap `.bt` file's occupied cells as map `map` (bounds and sun
+    /// given, OctoMap's cell (0, 0, 0) with its minimum corner at `origin`: see
+    /// [`dyfos_shared::world::octomap::world_from_bt`]), as [`Client::upload_map`]
+    /// does; returns the version. A file that cannot be read as an OctoMap, or whose
+    /// cells do not fit a map, is refused before anything is sent (`Invalid`, with
+    /// `invalid_delta` or `over_capacity`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn upload_octomap(
+        &mut self,
+        map: MapId,
+        bt: &[u8],
+        origin: dyfos_shared::math::Point3<f64>,
+        bounds: dyfos_shared::world::Bounds,
+        sun: dyfos_shared::world::Sun,
+        replace: bool,
+        timeout: Duration,
+    ) -> Result<u64, MapRequestError> {
+        use dyfos_shared::world::{VoxelError, octomap::OctomapError};
+        let world = dyfos_shared::world::octomap::world_from_bt(bt, origin, bounds, sun).map_err(|e| {
+            let status = match e {
+                OctomapError::Map(VoxelError::TooManyCells { .. } | VoxelError::GridTooLarge { .. }) => {
+                    Status::OverCapacity
+                }
+                _ => Status::InvalidDelta,
+            };
+            MapRequestError::Invalid(Rejection::new(status, format!("OctoMap: {e}")))
+        })?;
+        self.upload_map(map, &world, replace, timeout)
+    }
+
     /// Makes sure the daemon holds `world` (a scenario's map) and returns its id and
     /// version: the map is uploaded under `map` (default: [`World::content_id`], so
     /// the same scenario reuses its map); if that id holds the same content already,

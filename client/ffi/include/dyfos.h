@@ -656,6 +656,30 @@ dyfos_status dyfos_client_create_map(struct dyfos_client *client,
                                      uint64_t *version_out);
 
 /**
+ * Creates map `map` (or, with `replace` true, replaces it) from the bytes of an
+ * OctoMap `.bt` file (`bt`, `bt_len` bytes): its occupied cells become the map's
+ * voxels, OctoMap's cell (0, 0, 0) with its minimum corner at `origin` (3 doubles,
+ * m; NULL for (0, 0, 0)), with `bounds` (4 doubles) and the sun. Writes the version
+ * to `*version_out` unless it is NULL. A file that is not a readable `.bt` is
+ * `DYFOS_STATUS_INVALID_DELTA` (the message says what is wrong), too many cells
+ * `DYFOS_STATUS_OVER_CAPACITY`; nothing is sent then.
+ *
+ * # Safety
+ * `bt` is NULL or points to `bt_len` readable bytes; `origin` is NULL or 3 readable
+ * doubles; `bounds` is NULL or 4 readable doubles; `version_out` is NULL or writable.
+ */
+dyfos_status dyfos_client_upload_octomap(struct dyfos_client *client,
+                                         uint64_t map,
+                                         const uint8_t *bt,
+                                         size_t bt_len,
+                                         const double *origin,
+                                         const double *bounds,
+                                         double sun_elevation,
+                                         double sun_azimuth,
+                                         bool replace,
+                                         uint64_t *version_out);
+
+/**
  * Applies map deltas (a JSON array, the format of `dyfos map apply` files) to map
  * `map` as one atomic batch and writes the new version to `*version_out` unless it
  * is NULL. With `expected_version` other than `DYFOS_ANY_VERSION`, the map must be

@@ -24,6 +24,7 @@
 #include <stdexcept>
 #include <string>
 #include <utility>
+#include <vector>
 
 namespace dyfos {
 
@@ -348,6 +349,17 @@ class Client {
     MapVersion out{};
     detail::check(dyfos_client_upload_scenario(handle_, scenario_json.c_str(), &out.map, &out.version));
     return out;
+  }
+
+  /// Creates (or, with `replace`, replaces) map `map` from an OctoMap `.bt` file's bytes;
+  /// OctoMap's cell (0, 0, 0) has its minimum corner at `origin`. Returns the version.
+  std::uint64_t upload_octomap(std::uint64_t map, const std::vector<std::uint8_t>& bt,
+                               const std::array<double, 3>& origin, const std::array<double, 4>& bounds,
+                               double sun_elevation, double sun_azimuth, bool replace = false) {
+    std::uint64_t version = 0;
+    detail::check(dyfos_client_upload_octomap(handle_, map, bt.data(), bt.size(), origin.data(), bounds.data(),
+                                              sun_elevation, sun_azimuth, replace, &version));
+    return version;
   }
 
   /// Creates an empty map (version 0) with bounds (x_min, y_min, x_max, y_max) and

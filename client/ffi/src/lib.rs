@@ -309,6 +309,55 @@ pub unsafe extern "C" fn dyfos_client_create_map(
     })
 }
 
+/// Creates map `map` (or, with `replace` true, replaces it) from the bytes of an
+/// OctoMap `.bt` file (`bt`, `bt_len` bytes): its occupied cells become the map's
+/// voxels, OctoMap's cell (0, 0, 0) with its minimum corner at `origin` (3 doubles,
+/// m; NULL for (0, 0, 0)), with `bounds` (4 doubles) and the sun. Writes the version
+/// to `*version_out` unless it is NULL. A file that is not a readable `.bt` is
+/// `DYFOS_STATUS_INVALID_DELTA` (the message says what is wrong), too many cells
+/// `DYFOS_STATUS_OVER_CAPACITY`; nothing is sent then.
+///
+/// # Safety
+/// `bt` is NULL or points to `bt_len` readable bytes; `origin` is NULL or 3 readable
+/// doubles; `bounds` is NULL or 4 readable doubles; `version_out` is NULL or writable.
+#[unsafe(no_mangle)]
+#[allow(clippy::too_many_arguments)]
+pub unsafe extern "C" fn dyfos_client_upload_octomap(
+    client: *mut dyfos_client,
+    map: u64,
+    bt: *const u8,
+    bt_len: usize,
+    origin: *const f64,
+    bounds: *const f64,
+    sun_elevation: f64,
+    sun_azimuth: f64,
+    replace: bool,
+    version_out: *mut u64,
+) -> dyfos_status {
+    boundary(|| {
+        if bt.is_null() {
+            return Err(Failure::null("bt"));
+        }
+        // SAFETY: non-null and `bt_len` readable bytes, as the caller promises.
+        let bytes = unsafe { std::slice::from_raw_parts(bt, bt_len) };
+        // SAFETY: NULL or 3 readable doubles, as the caller promises.
+        let origin =
+            if origin.is_null() { [0.0; 3] } else { *unsafe { required(origin.cast::<[f64; 3]>(), "origin")? } };
+        // SAFETY: NULL or 4 readable doubles, as the caller promises.
+        let b = unsafe { required(bounds.cast::<[f64; 4]>(), "bounds")? };
+        let bounds = Bounds::new(*b).map_err(|e| Failure::invalid(format!("bounds: {e}")))?;
+        let sun = Sun::new(sun_elevation, sun_azimuth).map_err(|e| Failure::invalid(format!("sun: {e}")))?;
+        let origin = dyfos_shared::math::Point3::from(origin);
+        let version =
+            with_client(client, |c, timeout| Ok(c.upload_octomap(map, bytes, origin, bounds, sun, replace, timeout)?))?;
+        if !version_out.is_null() {
+            // SAFETY: non-null and writable, as the caller promises.
+            unsafe { write(version_out, "version_out", version)? };
+        }
+        Ok(())
+    })
+}
+
 /// Applies map deltas (a JSON array, the format of `dyfos map apply` files) to map
 /// `map` as one atomic batch and writes the new version to `*version_out` unless it
 /// is NULL. With `expected_version` other than `DYFOS_ANY_VERSION`, the map must be

@@ -430,6 +430,26 @@ impl PyClient {
         self.call(py, timeout, |c, t| c.upload_scenario_map(&scenario.world, map_id, replace, t))
     }
 
+    /// Uploads an OctoMap `.bt` file's bytes as map `map_id`; returns the version.
+    #[pyo3(signature = (map_id, bt, bounds, sun, origin=[0.0, 0.0, 0.0], replace=false, timeout=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn upload_octomap(
+        &self,
+        py: Python<'_>,
+        map_id: u64,
+        bt: Vec<u8>,
+        bounds: [f64; 4],
+        sun: (f64, f64),
+        origin: [f64; 3],
+        replace: bool,
+        timeout: Option<f64>,
+    ) -> PyResult<u64> {
+        let bounds = Bounds::new(bounds).map_err(|e| to_pyerr(py, ErrorInfo::new("malformed_request", e)))?;
+        let sun = Sun::new(sun.0, sun.1).map_err(|e| to_pyerr(py, ErrorInfo::new("malformed_request", e)))?;
+        let origin = dyfos_shared::math::Point3::from(origin);
+        self.call(py, timeout, |c, t| c.upload_octomap(map_id, &bt, origin, bounds, sun, replace, t))
+    }
+
     /// Creates an empty map at version 0; returns the version.
     #[pyo3(signature = (map_id, bounds, sun, timeout=None))]
     fn create_map(

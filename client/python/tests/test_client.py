@@ -259,3 +259,28 @@ def test_answer_to_dict_is_a_fresh_copy(client: dyfos.Client) -> None:
     saved = copy.deepcopy(d)
     d["x"][0] = 123.0
     assert answer.to_dict() == saved
+
+
+def test_an_octomap_uploads_updates_and_answers_as_its_scenario(client: dyfos.Client) -> None:
+    """``upload_octomap`` (path or bytes) makes the map the scenario naming the same
+    ``.bt`` describes: ``dyfos solve`` of that scenario answers the same, bit for bit;
+    voxel deltas update it; a file that is not a ``.bt`` is refused, naming why."""
+    scenario = DATA / "octomap" / "geb079-scenario.json"
+    s = dyfos.read_scenario(scenario)
+    bt = DATA / "octomap" / "geb079.bt"
+    kwargs: Dict[str, Any] = dict(bounds=s["bounds"], sun=(0.6, 2.4), origin=s["octomap"]["origin"])
+    assert client.upload_octomap(0x0C70, bt, **kwargs) == 0
+    assert client.upload_octomap(0x0C71, bt.read_bytes(), **kwargs) == 0
+    got = client.rendezvous(0x0C70, s["rover"]["mean"], s["rover"]["cov"], params=s["params"], seed=4).to_dict()
+    expected = dyfos_cli("solve", str(scenario), "--seed", "4")
+    assert bits(without_micros(got)) == bits(without_micros(expected))
+    snapshot = client.snapshot(0x0C71)
+    assert len(snapshot["voxels"]["occupied"]) == 185_673
+    voxels = {"resolution": snapshot["voxels"]["resolution"], "origin": snapshot["voxels"]["origin"]}
+    freed = snapshot["voxels"]["occupied"][:10]
+    version = client.apply(0x0C71, [{"SetVoxels": {**voxels, "cells": freed, "occupied": False}}])
+    assert version == 1
+    assert len(client.snapshot(0x0C71)["voxels"]["occupied"]) == 185_673 - 10
+    with pytest.raises(dyfos.InvalidRequestError) as refused:
+        client.upload_octomap(0x0C72, scenario, **kwargs)
+    assert "not an OctoMap .bt file" in str(refused.value)

@@ -102,6 +102,12 @@ pub enum OctomapError {
     /// The tree data is inconsistent.
     #[error("OctoMap data is corrupt: {0}")]
     Corrupt(String),
+    /// The file's cells do not make a map (too many cells, spread too far).
+    #[error("the OctoMap's occupied cells do not fit a map: {0}")]
+    Map(#[from] VoxelError),
+    /// The bounds or sun given with it are invalid.
+    #[error("the map around the OctoMap: {0}")]
+    World(String),
     /// A cell to write lies outside OctoMap's keys.
     #[error("cell {0:?} lies outside OctoMap's key range (indices -32768 to 32767 per axis); move the map's origin")]
     OutOfRange(CellIndex),
@@ -148,6 +154,31 @@ impl Octomap {
         }
         crate::world::VoxelGrid::from_cubes(self.resolution, origin, self.occupied.iter().map(|c| (c.min, c.side)))
     }
+}
+
+/// The map an OctoMap `.bt` file describes: its occupied cells as the voxels of a
+/// map with `bounds` and `sun`, OctoMap's cell (0, 0, 0) with its minimum corner at
+/// `origin` (SPEC §1, §11), at version 0. What `dyfos map upload --octomap` sends.
+///
+/// ```
+/// use dyfos_shared::world::octomap::{world_from_bt, write_bt};
+/// use dyfos_shared::world::{Bounds, Sun};
+/// use nalgebra::Point3;
+///
+/// let bt = write_bt(0.05, [[0, 0, 0], [1, 0, 0]]).unwrap();
+/// let bounds = Bounds::new([-5.0, -5.0, 5.0, 5.0]).unwrap();
+/// let world = world_from_bt(&bt, Point3::new(0.0, 0.0, -0.05), bounds, Sun::new(0.5, 1.0).unwrap()).unwrap();
+/// assert_eq!(world.voxels().unwrap().len(), 2);
+/// assert!(world_from_bt(&bt[..bt.len() - 1], Point3::origin(), bounds, Sun::new(0.5, 1.0).unwrap()).is_err());
+/// ```
+pub fn world_from_bt(
+    bytes: &[u8],
+    origin: crate::math::Point3<f64>,
+    bounds: crate::world::Bounds,
+    sun: crate::world::Sun,
+) -> Result<crate::world::World, OctomapError> {
+    let grid = Octomap::from_bt(bytes)?.to_voxels(origin)?;
+    crate::world::World::new(0, bounds, sun, [], Some(grid)).map_err(|e| OctomapError::World(e.to_string()))
 }
 
 /// Writes `cells` (indices, any order, duplicates allowed) as a `.bt` file of

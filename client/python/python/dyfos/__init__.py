@@ -468,6 +468,51 @@ class Client:
         )
         return map_id
 
+    def upload_octomap(
+        self,
+        map_id: int,
+        octomap: Union[str, "_os.PathLike[str]", bytes],
+        bounds: Vector,
+        sun: Vector,
+        origin: Vector = (0.0, 0.0, 0.0),
+        replace: bool = False,
+        timeout: Optional[Seconds] = None,
+    ) -> int:
+        """Creates (or, with ``replace``, replaces) map ``map_id`` from an OctoMap
+        ``.bt`` file (``OcTree::writeBinary``, octomap_server's saved maps) and returns
+        its version. Update it later with :meth:`apply` and ``SetVoxels`` /
+        ``SetVoxelBlocks`` deltas of the same resolution and origin.
+
+        Args:
+            octomap: the ``.bt`` file's path, or its bytes.
+            bounds: ``[x_min, y_min, x_max, y_max]`` of the map, metres.
+            sun: ``(elevation, azimuth)`` in radians.
+            origin: where the minimum corner of OctoMap's cell (0, 0, 0) lies in the
+                map frame (default: OctoMap's frame is the map frame); see the README.
+
+        Raises:
+            InvalidRequestError: not a readable ``.bt`` (``invalid_delta``, naming what
+                is wrong), or ``map_id`` holds another map (``map_exists``).
+            DyfosError: ``over_capacity`` when the map has too many cells.
+        """
+        if isinstance(octomap, (bytes, bytearray)):
+            data = bytes(octomap)
+        else:
+            try:
+                with open(octomap, "rb") as f:
+                    data = f.read()
+            except OSError as e:
+                raise InvalidRequestError("invalid_delta", f"cannot read OctoMap file {octomap}: {e}") from e
+        return self._raw.upload_octomap(
+            map_id,
+            data,
+            _floats(bounds, 4, "bounds"),
+            tuple(_floats(sun, 2, "sun")),
+            _floats(origin, 3, "origin"),
+            replace,
+            _seconds(timeout, "timeout"),
+        )
+
     def create_map(
         self, map_id: int, bounds: Vector, sun: Vector, timeout: Optional[Seconds] = None
     ) -> int:

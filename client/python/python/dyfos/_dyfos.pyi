@@ -50,6 +50,16 @@ class RawClient:
     def upload_scenario(
         self, scenario_json: str, map_id: Optional[int] = None, replace: bool = False, timeout: Optional[float] = None
     ) -> Tuple[int, int]: ...
+    def upload_octomap(
+        self,
+        map_id: int,
+        bt: bytes,
+        bounds: Sequence[float],
+        sun: Tuple[float, float],
+        origin: Sequence[float] = ...,
+        replace: bool = False,
+        timeout: Optional[float] = None,
+    ) -> int: ...
     def create_map(
         self, map_id: int, bounds: Sequence[float], sun: Tuple[float, float], timeout: Optional[float] = None
     ) -> int: ...

@@ -283,12 +283,10 @@ fn octomap_world(
         _ => Point3::origin(),
     };
     let bytes = std::fs::read(file).map_err(|e| Failure::invalid(anyhow!("cannot read {}: {e}", file.display())))?;
-    let map = dyfos_shared::world::octomap::Octomap::from_bt(&bytes)
-        .map_err(|e| Failure::invalid(anyhow!("{}: {e}", file.display())))?;
-    let voxels = map.to_voxels(origin).map_err(|e| Failure::invalid(anyhow!("{}: {e}", file.display())))?;
     let bounds = Bounds::new([x0, y0, x1, y1]).map_err(|e| Failure::invalid(anyhow!("--bounds: {e}")))?;
     let sun = Sun::new(elevation, azimuth).map_err(|e| Failure::invalid(anyhow!("--sun: {e}")))?;
-    World::new(0, bounds, sun, [], Some(voxels)).map_err(|e| Failure::invalid(anyhow!("{}: {e}", file.display())))
+    dyfos_shared::world::octomap::world_from_bt(&bytes, origin, bounds, sun)
+        .map_err(|e| Failure::invalid(anyhow!("{}: {e}", file.display())))
 }
 
 /// `dyfos stats`.

@@ -110,6 +110,22 @@ impl Node {
         }
     }
 
+    /// Sets or clears one bit of brick `slot`: the common case of [`Node::edit`]
+    /// without counting whole bricks.
+    fn edit_bit(&mut self, slot: usize, word: usize, bit: u32, occupied: bool) {
+        let i = self.slots[slot];
+        if i == 0 || !occupied {
+            let mut bits = [0u64; 8];
+            bits[word] = 1 << bit;
+            return self.edit(slot, &bits, occupied);
+        }
+        let w = &mut self.bricks[usize::from(i) - 1].1[word];
+        if *w >> bit & 1 == 0 {
+            *w |= 1 << bit;
+            self.cells += 1;
+        }
+    }
+
     /// Recomputes the bounding box from the bricks.
     fn refresh_bounds(&mut self) {
         let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
@@ -346,10 +362,14 @@ impl Editor {
 
     /// Sets or clears one cell.
     pub(super) fn edit_cell(&mut self, c: CellIndex, occupied: bool) {
-        let mut bits = [0u64; 8];
-        let (w, b) = bit_of(c[0] & 7, c[1] & 7, c[2] & 7);
-        bits[w] = 1 << b;
-        self.edit_brick(c.map(|v| v & !7), &bits, occupied);
+        let key = c.map(|v| v >> NODE_SHIFT);
+        if let Some(node) = self.node_mut(key, occupied) {
+            let before = node.cells;
+            let (w, b) = bit_of(c[0] & 7, c[1] & 7, c[2] & 7);
+            node.edit_bit(slot_of(c[0] >> 3 & 7, c[1] >> 3 & 7, c[2] >> 3 & 7), w, b, occupied);
+            let after = node.cells;
+            self.tree.cells = self.tree.cells + u64::from(after) - u64::from(before);
+        }
     }
 
     /// Occupied cells so far.
