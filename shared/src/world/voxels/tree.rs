@@ -241,6 +241,11 @@ impl Tree {
     /// node and brick lookups.
     pub(super) fn any_in_box(&self, lo: CellIndex, hi: CellIndex, mut budget: u32) -> Option<bool> {
         let range = |shift: u32, a: usize| (lo[a] >> shift)..=(hi[a] >> shift);
+        // Give up before any work when the box's bricks alone exceed the budget.
+        let bricks = (0..3).try_fold(1u64, |n, a| n.checked_mul(((hi[a] >> 3) - (lo[a] >> 3) + 1).max(0) as u64));
+        if bricks.is_none_or(|b| b > u64::from(budget)) {
+            return None;
+        }
         for nx in range(NODE_SHIFT, 0) {
             for ny in range(NODE_SHIFT, 1) {
                 for nz in range(NODE_SHIFT, 2) {

@@ -149,6 +149,30 @@ impl<'a> Walk<'a> {
         }
     }
 
+    /// Whether no occupied cell's closed cube can meet the segment's part `[ta, tb]`:
+    /// its bounding box, widened by a cell for rounding, holds none (decided only
+    /// when the box spans few bricks).
+    #[inline]
+    fn part_is_clear(&self, ta: f64, tb: f64) -> bool {
+        let (a, b) = (self.seg.point_at(ta), self.seg.point_at(tb));
+        let mut lo = [0i64; 3];
+        let mut hi = [0i64; 3];
+        for i in 0..3 {
+            let to_cell = |v: f64| ((v - self.origin[i]) * self.inv_resolution).floor();
+            let (l, h) = (to_cell(a[i].min(b[i])) - 2.0, to_cell(a[i].max(b[i])) + 1.0);
+            if !(l.is_finite() && h.is_finite()) {
+                return false;
+            }
+            // Within the occupied box (plus one): far coordinates stay small integers.
+            lo[i] = l.max((self.lo[i] - 1) as f64) as i64;
+            hi[i] = h.min(self.end[i] as f64) as i64;
+            if lo[i] > hi[i] {
+                return true;
+            }
+        }
+        self.tree.any_in_box(lo, hi, 8) == Some(false)
+    }
+
     /// Checks `cell` and the cells reached from it by un-stepping any subset of the
     /// `tied` axes or moving to the lower twin on `twin` axes, all touched at `t`: a
     /// contact at the finest level, a walk of the next level inside a coarser one.
@@ -199,6 +223,10 @@ impl<'a> Walk<'a> {
             }
             let exit = if inside { tb.max(t) } else { t };
             let end = exit.min(t1).min(*best);
+            // The cells around that part of the segment, when few, settle it at once.
+            if self.part_is_clear(t, end) {
+                continue;
+            }
             match L {
                 1 => self.walk::<0>(t, end, best),
                 2 => self.walk::<1>(t, end, best),
