@@ -656,10 +656,11 @@ dyfos_status dyfos_client_create_map(struct dyfos_client *client,
                                      uint64_t *version_out);
 
 /**
- * Creates map `map` (or, with `replace` true, replaces it) from the bytes of an
+ * Creates map `map` (or, with `replace` 1, replaces it) from the bytes of an
  * OctoMap `.bt` file (`bt`, `bt_len` bytes): its occupied cells become the map's
  * voxels, OctoMap's cell (0, 0, 0) with its minimum corner at `origin` (3 doubles,
- * m; NULL for (0, 0, 0)), with `bounds` (4 doubles) and the sun. Writes the version
+ * m; NULL for (0, 0, 0)), with `bounds` (4 doubles) and the sun; `replace` is 0 or
+ * 1 (`DYFOS_STATUS_INVALID_ARGUMENT` otherwise). Writes the version
  * to `*version_out` unless it is NULL. A file that is not a readable `.bt` is
  * `DYFOS_STATUS_INVALID_DELTA` (the message says what is wrong), too many cells
  * `DYFOS_STATUS_OVER_CAPACITY`; nothing is sent then.
@@ -676,7 +677,7 @@ dyfos_status dyfos_client_upload_octomap(struct dyfos_client *client,
                                          const double *bounds,
                                          double sun_elevation,
                                          double sun_azimuth,
-                                         bool replace,
+                                         uint32_t replace,
                                          uint64_t *version_out);
 
 /**

@@ -358,7 +358,7 @@ class Client {
                                double sun_elevation, double sun_azimuth, bool replace = false) {
     std::uint64_t version = 0;
     detail::check(dyfos_client_upload_octomap(handle_, map, bt.data(), bt.size(), origin.data(), bounds.data(),
-                                              sun_elevation, sun_azimuth, replace, &version));
+                                              sun_elevation, sun_azimuth, replace ? 1u : 0u, &version));
     return version;
   }
 

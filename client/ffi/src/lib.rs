@@ -309,10 +309,11 @@ pub unsafe extern "C" fn dyfos_client_create_map(
     })
 }
 
-/// Creates map `map` (or, with `replace` true, replaces it) from the bytes of an
+/// Creates map `map` (or, with `replace` 1, replaces it) from the bytes of an
 /// OctoMap `.bt` file (`bt`, `bt_len` bytes): its occupied cells become the map's
 /// voxels, OctoMap's cell (0, 0, 0) with its minimum corner at `origin` (3 doubles,
-/// m; NULL for (0, 0, 0)), with `bounds` (4 doubles) and the sun. Writes the version
+/// m; NULL for (0, 0, 0)), with `bounds` (4 doubles) and the sun; `replace` is 0 or
+/// 1 (`DYFOS_STATUS_INVALID_ARGUMENT` otherwise). Writes the version
 /// to `*version_out` unless it is NULL. A file that is not a readable `.bt` is
 /// `DYFOS_STATUS_INVALID_DELTA` (the message says what is wrong), too many cells
 /// `DYFOS_STATUS_OVER_CAPACITY`; nothing is sent then.
@@ -331,10 +332,15 @@ pub unsafe extern "C" fn dyfos_client_upload_octomap(
     bounds: *const f64,
     sun_elevation: f64,
     sun_azimuth: f64,
-    replace: bool,
+    replace: u32,
     version_out: *mut u64,
 ) -> dyfos_status {
     boundary(|| {
+        let replace = match replace {
+            0 => false,
+            1 => true,
+            r => return Err(Failure::invalid(format!("replace = {r} must be 0 or 1"))),
+        };
         if bt.is_null() {
             return Err(Failure::null("bt"));
         }

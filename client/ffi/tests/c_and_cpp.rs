@@ -163,6 +163,7 @@ fn the_c_and_cpp_examples_print_what_dyfos_solve_prints() {
 fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String, String)>, Option<String>) {
     let mut daemon = sandbox.start_daemon(&[]);
     let mut child = Command::new(program)
+        .env("DYFOS_TEST_OCTOMAP", data("octomap/geb079.bt"))
         .arg(scenario)
         .args([&sandbox.prefix, &sandbox.domain])
         .stdin(Stdio::piped())
@@ -225,6 +226,8 @@ fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
         }
     }
     assert_eq!(compared, 3, "{sections:?}");
+    // The OctoMap map, replaced once (origin NULL: OctoMap's frame).
+    assert!(sections.contains(&("octomap".to_string(), "version=1\n".to_string())), "{sections:?}");
     // The snapshot equals `dyfos map snapshot`'s, but for the CLI's `map` field.
     let snapshot = sections.iter().find(|(n, _)| n.starts_with("snapshot ")).expect("a snapshot").1.clone();
     let ours: serde_json::Value = serde_json::from_str(&snapshot).expect("snapshot JSON");

@@ -8,6 +8,7 @@
  * stdout carries sections the driver reads, each starting with a line "--- NAME":
  *   --- answer ALGORITHM SEED   the answer's JSON (dyfos_answer_to_json)
  *   --- snapshot MAP            the snapshot JSON of the small map
+ *   --- octomap                 the version of the OctoMap map (with $DYFOS_TEST_OCTOMAP set)
  *   --- kill                    the driver kills the daemon, then writes a line to stdin
  *   --- done
  */
@@ -53,6 +54,23 @@ static char *read_file(const char *path) {
   if (text) text[n] = '\0';
   fclose(f);
   return text;
+}
+
+/* A whole file's bytes and length (NULL if unreadable). */
+static unsigned char *read_bytes(const char *path, size_t *len) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  fseek(f, 0, SEEK_END);
+  long n = ftell(f);
+  fseek(f, 0, SEEK_SET);
+  unsigned char *bytes = malloc(n > 0 ? (size_t)n : 1);
+  if (bytes && fread(bytes, 1, (size_t)n, f) != (size_t)n) {
+    free(bytes);
+    bytes = NULL;
+  }
+  fclose(f);
+  *len = (size_t)n;
+  return bytes;
 }
 
 /* Two answers equal in every field but the compute time. */
@@ -108,6 +126,29 @@ int main(int argc, char **argv) {
   EXPECT(dyfos_client_upload_scenario(client, scenario, &again, &version_again), DYFOS_STATUS_OK);
   EXPECT_TRUE(map == again && version == 0 && version_again == 0);
   EXPECT(dyfos_client_upload_scenario(client, "{\"bounds\": [", &again, NULL), DYFOS_STATUS_INVALID_ARGUMENT);
+
+  /* An OctoMap .bt: uploaded, a truncated copy refused before sending, replaced. */
+  const char *bt_path = getenv("DYFOS_TEST_OCTOMAP");
+  if (bt_path) {
+    size_t bt_len = 0;
+    unsigned char *bt = read_bytes(bt_path, &bt_len);
+    EXPECT_TRUE(bt != NULL && bt_len > 100);
+    double origin[3] = {0.0, 0.0, 0.32}, area[4] = {-12.0, -8.0, 31.0, 10.0};
+    uint64_t at = 99;
+    EXPECT(dyfos_client_upload_octomap(client, 0xB7, bt, bt_len, origin, area, 0.6, 2.4, 0, &at), DYFOS_STATUS_OK);
+    EXPECT_TRUE(at == 0);
+    EXPECT(dyfos_client_upload_octomap(client, 0xB8, bt, bt_len - 1, origin, area, 0.6, 2.4, 0, NULL),
+           DYFOS_STATUS_INVALID_DELTA);
+    EXPECT(dyfos_client_upload_octomap(client, 0xB8, NULL, 0, origin, area, 0.6, 2.4, 0, NULL),
+           DYFOS_STATUS_NULL_PARAMETER);
+    EXPECT(dyfos_client_upload_octomap(client, 0xB7, bt, bt_len, origin, area, 0.6, 2.4, 0, NULL),
+           DYFOS_STATUS_MAP_EXISTS);
+    EXPECT(dyfos_client_upload_octomap(client, 0xB8, bt, bt_len, origin, area, 0.6, 2.4, 2, NULL),
+           DYFOS_STATUS_INVALID_ARGUMENT);
+    EXPECT(dyfos_client_upload_octomap(client, 0xB7, bt, bt_len, NULL, area, 0.6, 2.4, 1, &at), DYFOS_STATUS_OK);
+    printf("--- octomap\nversion=%llu\n", (unsigned long long)at);
+    free(bt);
+  }
   EXPECT(dyfos_client_upload_scenario(client, NULL, &again, NULL), DYFOS_STATUS_NULL_PARAMETER);
 
   /* Answers, compared with `dyfos solve` by the driver. */
