@@ -898,6 +898,9 @@ fn pick(rows: &[Row], w: Workload, clients: usize, rate: Option<f64>, beside: Op
     })
 }
 
+/// One goal's cell from a daemon's rows and idle CPU: the text, and whether met.
+type GoalCell<'a> = dyn Fn(&[Row], Option<f64>) -> (String, Option<bool>) + 'a;
+
 /// Issue 15's goals, one row each, for the daemon of the run and (if any) the
 /// `--compare-daemon-arg` one; "met" is for the first.
 fn goals(a: &LatencyArgs, rows: &[Row], idle: Option<f64>, other: Option<(&[Row], Option<f64>)>) -> String {
@@ -915,7 +918,7 @@ fn goals(a: &LatencyArgs, rows: &[Row], idle: Option<f64>, other: Option<(&[Row]
         Some(false) => "**no**",
         None => "–",
     };
-    let mut line = |target: String, cell: &dyn Fn(&[Row], Option<f64>) -> (String, Option<bool>)| {
+    let mut line = |target: String, cell: &GoalCell| {
         let (mine, ok) = cell(rows, idle);
         match other {
             Some((o, oi)) => {
