@@ -319,6 +319,8 @@ pub struct Daemon {
     /// exponentially weighted), which sizes the polling window.
     last_arrival: Instant,
     arrival_gap_us: f64,
+    /// Whether every core is taken, looked up at most every [`IdleCores::EVERY`].
+    cores: sched::IdleCores,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -501,6 +503,7 @@ impl Daemon {
             ipc_scheduling,
             last_arrival: Instant::now(),
             arrival_gap_us: f64::INFINITY,
+            cores: sched::IdleCores::new(cores),
         })
     }
 
@@ -611,25 +614,25 @@ impl Daemon {
 
     /// How long the IPC thread should keep polling after the last request before
     /// it sleeps: [`DaemonConfig::spin_max`] while requests arrive about that often,
-    /// else [`DaemonConfig::spin`]; zero while every worker searches and the thread
-    /// may sleep real-time (its wake-up then preempts a search, and polling would
-    /// take a core from one). A non-zero window returns the thread to normal
-    /// priority first, so its polling yields to every other thread.
+    /// else [`DaemonConfig::spin`]. Unless real-time scheduling is off, zero while
+    /// every worker searches or no core is idle: a polling thread that yields waits
+    /// a whole time slice behind the busy ones, where a sleeping one is woken ahead
+    /// of them (real-time, or above the niced workers). A non-zero window returns
+    /// the thread to normal priority first, so its polling yields to every other
+    /// thread.
     pub fn poll_window(&mut self) -> Duration {
         let base = self.config.spin;
         let steady = self.config.spin_max > base && self.arrival_gap_us <= self.config.spin_max.as_secs_f64() * 1e6;
         let window = if steady { self.config.spin_max } else { base };
-        if window.is_zero() {
+        if window.is_zero() || self.ipc_scheduling == IpcScheduling::Off {
             return window;
         }
-        if matches!(self.ipc_scheduling, IpcScheduling::Realtime(_)) {
-            if self.shared.queue.lock().map_or(0, |q| q.running()) >= self.shared.threads {
-                return Duration::ZERO;
-            }
-            self.priority.lower();
-            if self.priority.is_realtime() {
-                return Duration::ZERO;
-            }
+        if self.shared.queue.lock().map_or(0, |q| q.running()) >= self.shared.threads || self.cores.busy() {
+            return Duration::ZERO;
+        }
+        self.priority.lower();
+        if self.priority.is_realtime() {
+            return Duration::ZERO;
         }
         window
     }
