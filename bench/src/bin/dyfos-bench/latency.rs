@@ -712,9 +712,6 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
             groups.insert(0, vec![Group::closed(Workload::Hog, h)]);
         }
         for g in groups {
-            if g.len() == 1 && rows.iter().any(|r| same_group(r, &g[0]) && r.alongside.is_none()) {
-                continue;
-            }
             rows.extend(b.run_groups(&g)?);
         }
         idle = measure_idle(b, daemon.id());
@@ -771,10 +768,6 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     );
     rows.extend(baselines.into_iter().map(|(_, r)| Row { clients: 0, ..r }));
     Ok((report, rows, shutdown, idle))
-}
-
-fn same_group(r: &Row, g: &Group) -> bool {
-    r.workload == g.workload && r.clients == g.clients && r.rate == g.rate
 }
 
 /// Hog processes of the goals: `--hogs`, default one per core; `None` for 0.
@@ -884,9 +877,9 @@ fn before_after(before: &[Row], after: &[Row], flags: &[String]) -> String {
 }
 
 /// The row of `w` with `clients` at `rate`, run beside a group of `beside` (or
-/// alone).
+/// alone); the last such row, the one run nearest the goals' other runs.
 fn pick(rows: &[Row], w: Workload, clients: usize, rate: Option<f64>, beside: Option<Workload>) -> Option<&Row> {
-    rows.iter().find(|r| {
+    rows.iter().rev().find(|r| {
         r.workload == w
             && r.clients == clients
             && r.rate == rate
