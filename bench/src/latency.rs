@@ -61,11 +61,31 @@ pub enum Workload {
     /// iceoryx2's raw request-response round trip with the rendezvous payload types
     /// against a busy-polling server that only copies back a fixed reply.
     Floor,
+    /// `stats` requests (answered by the IPC thread).
+    Stats,
+    /// Map snapshots of the numerical maps (answered by the IPC thread).
+    Map,
+    /// One greedy client: `dyfos` queries with [`GREEDY_IN_FLIGHT`] in flight at
+    /// all times on one connection ([`GreedyClient`]).
+    Greedy,
+    /// Not a client: a process that burns one core (a CPU hog beside the daemon).
+    Hog,
 }
+
+/// Queries the greedy client keeps in flight: `dyfosd`'s default limit per client.
+pub const GREEDY_IN_FLIGHT: usize = 4;
 
 impl Workload {
     /// Every workload.
-    pub const ALL: [Workload; 3] = [Workload::Null, Workload::Dyfos, Workload::Floor];
+    pub const ALL: [Workload; 7] = [
+        Workload::Null,
+        Workload::Dyfos,
+        Workload::Floor,
+        Workload::Stats,
+        Workload::Map,
+        Workload::Greedy,
+        Workload::Hog,
+    ];
 
     /// The name used on the command line and in tables.
     pub fn name(self) -> &'static str {
@@ -73,6 +93,10 @@ impl Workload {
             Workload::Null => "null",
             Workload::Dyfos => "dyfos",
             Workload::Floor => "floor",
+            Workload::Stats => "stats",
+            Workload::Map => "map",
+            Workload::Greedy => "greedy",
+            Workload::Hog => "hog",
         }
     }
 
@@ -174,6 +198,9 @@ pub struct RunSamples {
     pub unsent: u64,
     /// Wall time of the measured part, s.
     pub elapsed_s: f64,
+    /// CPU time the process used over the measured part, s (hogs only).
+    #[serde(default)]
+    pub cpu_s: f64,
 }
 
 /// Waits until `target`: sleeps while it is far, spins for the last stretch (a
@@ -311,7 +338,7 @@ pub fn in_process(workload: Workload, set: &RequestSet, duration: Duration) -> R
                     .map(|a| Some(a.micros))
                     .map_err(|_| "no_feasible_pose".into())
             }
-            Workload::Null | Workload::Floor => {
+            _ => {
                 let header = request.header(Mode::Check, k as u64, [0, 0]);
                 let (decoded, _) = RendezvousRequest::decode(&header, &[]).map_err(|r| r.status.name().to_string())?;
                 let found = set.scenarios.get((decoded.map as usize).wrapping_sub(1)).map(|s| s.world.version());
@@ -435,6 +462,101 @@ impl FloorClient {
             }
             std::hint::spin_loop();
         }
+    }
+}
+
+/// A greedy client: keeps [`GREEDY_IN_FLIGHT`] `dyfos` queries in flight on one
+/// client port of the daemon's rendezvous service (raw iceoryx2, as
+/// `dyfos_client::Client` sends one at a time), polling for replies every 50 µs.
+pub struct GreedyClient {
+    _node: Node<FloorService>,
+    port: iceoryx2::port::client::Client<FloorService, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>,
+    wake: iceoryx2::port::notifier::Notifier<FloorService>,
+    next_id: u64,
+}
+
+impl std::fmt::Debug for GreedyClient {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GreedyClient").finish_non_exhaustive()
+    }
+}
+
+impl GreedyClient {
+    /// Opens the rendezvous service and wake-up event of the daemon at `prefix`.
+    pub fn open(domain: &str, prefix: &str) -> Result<Self, String> {
+        let node = node(domain)?;
+        let names = dyfos_shared::wire::ServiceNames::new(prefix).map_err(|e| e.to_string())?;
+        let name = |s: &str| ServiceName::new(s).map_err(|e| format!("service `{s}`: {e:?}"));
+        let port = node
+            .service_builder(&name(&names.rendezvous)?)
+            .request_response::<[WireDelta], RendezvousReply>()
+            .request_user_header::<RendezvousRequestHeader>()
+            .open()
+            .map_err(|e| format!("open {}: {e:?}", names.rendezvous))?
+            .client_builder()
+            .create()
+            .map_err(|e| format!("greedy client: {e:?}"))?;
+        let wake = node
+            .service_builder(&name(&names.wake)?)
+            .event()
+            .open()
+            .map_err(|e| format!("open {}: {e:?}", names.wake))?
+            .notifier_builder()
+            .create()
+            .map_err(|e| format!("wake notifier: {e:?}"))?;
+        Ok(GreedyClient { _node: node, port, wake, next_id: 1 << 40 })
+    }
+
+    /// Sends the requests of `set` in turn, [`GREEDY_IN_FLIGHT`] at a time, for
+    /// `duration`; each answered query is one sample (latency from its send).
+    pub fn run(&mut self, set: &RequestSet, index: usize, duration: Duration) -> Result<RunSamples, String> {
+        type Pending = iceoryx2::pending_response::PendingResponse<
+            FloorService,
+            [WireDelta],
+            RendezvousRequestHeader,
+            RendezvousReply,
+            (),
+        >;
+        let mut out = RunSamples::default();
+        let mut in_flight: Vec<(Pending, u64, Instant)> = Vec::with_capacity(GREEDY_IN_FLIGHT);
+        let start = Instant::now();
+        let mut k = 0;
+        while start.elapsed() < duration || !in_flight.is_empty() {
+            while in_flight.len() < GREEDY_IN_FLIGHT && start.elapsed() < duration {
+                let (_, request) = set.pick(index, k);
+                k += 1;
+                self.next_id += 1;
+                let header = request.header(Mode::Solve, self.next_id, [0, 0]);
+                let loan = self.port.loan_slice_uninit(0).map_err(|e| format!("loan: {e:?}"))?;
+                let mut loan = loan;
+                *loan.user_header_mut() = header;
+                let pending = loan.write_from_slice(&[]).send().map_err(|e| format!("send: {e:?}"))?;
+                self.wake.notify().map_err(|e| format!("notify: {e:?}"))?;
+                in_flight.push((pending, self.next_id, Instant::now()));
+            }
+            let mut i = 0;
+            while i < in_flight.len() {
+                let reply = in_flight[i].0.receive().map_err(|e| format!("receive: {e:?}"))?.map(|r| *r.payload());
+                match reply {
+                    Some(r) if r.request_id == in_flight[i].1 => {
+                        let (_, _, sent) = in_flight.swap_remove(i);
+                        let ns = u64::try_from(sent.elapsed().as_nanos()).unwrap_or(u64::MAX);
+                        if r.status == 0 {
+                            out.latency_ns.push(ns);
+                        } else {
+                            *out.errors.entry(format!("status {}", r.status)).or_default() += 1;
+                        }
+                    }
+                    _ => i += 1,
+                }
+            }
+            if start.elapsed() > duration * 4 + Duration::from_secs(30) {
+                return Err("the greedy client's queries were not answered".into());
+            }
+            std::thread::sleep(Duration::from_micros(50));
+        }
+        out.elapsed_s = start.elapsed().as_secs_f64();
+        Ok(out)
     }
 }
 

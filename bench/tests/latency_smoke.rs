@@ -24,6 +24,8 @@ fn latency_command_smoke_run() {
         .arg("--compare-daemon-arg=--spin-us=50")
         // Clients with a shorter poll window than the library default.
         .args(["--client-spin-us", "100"])
+        // Issue 15's goals, short: one hog, 0.2 s idle.
+        .args(["--hogs", "1", "--idle-seconds", "0.2"])
         .arg("--out")
         .arg(&out)
         .output()
@@ -42,7 +44,17 @@ fn latency_command_smoke_run() {
     }
     assert!(stdout.contains("in-process `dyfos` query"), "{stdout}");
     assert!(stdout.contains("### Mixed"), "{stdout}");
-    assert!(stdout.contains("(before) and with `--spin-us=50` (after)"), "{stdout}");
+    assert!(stdout.contains("(left) and with `--spin-us=50` (right)"), "{stdout}");
+    assert!(stdout.contains("### Targets of issue 15"), "{stdout}");
+    for goal in [
+        "| stats requests (300/s",
+        "| map requests (300/s",
+        "| idle: dyfosd CPU",
+        "| CPU hog: 1 hog",
+        "| greedy client",
+    ] {
+        assert!(stdout.contains(goal), "missing `{goal}` in\n{stdout}");
+    }
     assert!(stdout.contains("| null open loop, 300/s over 1 client(s), beside dyfos closed loop"), "{stdout}");
     assert!(stdout.contains("Daemon shutdown: clean (SIGTERM, exit 0)"), "{stdout}");
     assert!(stdout.contains("shared-memory files left in /dev/shm: none"), "{stdout}");
@@ -51,10 +63,11 @@ fn latency_command_smoke_run() {
         serde_json::from_str(&std::fs::read_to_string(out.join("latency.json")).expect("latency.json")).unwrap();
     let rows = rows.as_array().unwrap();
     // floor: 1 closed + 1 open; null and dyfos: 2 closed + 1 open each; the mixed
-    // run's two groups; 2 in-process.
-    assert_eq!(rows.len(), 12, "{rows:#?}");
-    assert_eq!(rows.iter().filter(|r| !r["alongside"].is_null()).count(), 2);
-    for r in rows {
+    // run's two groups; the goals: the hog alone, stats and map beside dyfos (2
+    // each), dyfos alone, hog beside dyfos (2), greedy beside dyfos (2); 2 in-process.
+    assert_eq!(rows.len(), 22, "{rows:#?}");
+    assert_eq!(rows.iter().filter(|r| !r["alongside"].is_null()).count(), 10);
+    for r in rows.iter().filter(|r| r["workload"] != "hog") {
         assert!(r["answered_per_s"].as_f64().unwrap() > 0.0, "nothing answered: {r}");
         assert!(r["errors"].as_object().unwrap().is_empty(), "errors: {r}");
         let l = &r["latency"];
@@ -69,6 +82,6 @@ fn latency_command_smoke_run() {
         assert!(text.len() > 200, "{file} is nearly empty");
     }
     let bad = Command::new(&exe).args(["latency", "--workloads", "nap", "--out"]).arg(&out).output().unwrap();
-    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("use floor, null or dyfos"));
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("use floor, null, dyfos"));
     let _ = std::fs::remove_dir_all(&out);
 }

@@ -24,6 +24,13 @@ type RendezvousPort = ClientPort<Ipc, [WireDelta], RendezvousRequestHeader, Rend
 type MapPort = ClientPort<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapReplyHeader>;
 type StatsPort = ClientPort<Ipc, StatsRequest, (), StatsReply, ()>;
 
+/// How long a client polls for a reply without yielding its core, at most, before
+/// it polls yielding (`ClientConfig::spin`): long enough for the daemon to answer a
+/// check-mode, `stats` or map request (its IPC thread wakes at real-time priority),
+/// short enough to cost nothing next to a search (`bench/RESULTS.md`, "Cheap
+/// requests while searches run").
+pub(crate) const HOT_SPIN: Duration = Duration::from_micros(50);
+
 /// How to reach the daemon.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ClientConfig {
@@ -200,6 +207,13 @@ impl Connection {
             let elapsed = now - start;
             if elapsed >= timeout {
                 return Err(CallError::Timeout(timeout));
+            }
+            if elapsed < spin.min(HOT_SPIN) {
+                // The first microseconds, poll without yielding: a cheap request's
+                // reply comes in that time, and a yield on a busy core hands it to
+                // another thread for a whole time slice (milliseconds) first.
+                std::hint::spin_loop();
+                continue;
             }
             if elapsed < spin {
                 // Yield rather than burn the core: on a busy machine the daemon may

@@ -310,6 +310,15 @@ pub struct RawClient {
 use dyfos_shared::wire::map::{MapReplyHeader, MapRequestHeader, WireDelta};
 use dyfos_shared::wire::rendezvous::{RendezvousReply, RendezvousRequestHeader};
 
+/// A rendezvous request of a [`RawClient`] in flight.
+pub type PendingRendezvous = iceoryx2::pending_response::PendingResponse<
+    iceoryx2::prelude::ipc::Service,
+    [WireDelta],
+    RendezvousRequestHeader,
+    RendezvousReply,
+    (),
+>;
+
 impl RawClient {
     /// Opens the sandbox daemon's services.
     pub fn open(sandbox: &Sandbox) -> RawClient {
@@ -364,6 +373,16 @@ impl RawClient {
         let pending = loan.write_from_slice(records).send().expect("send");
         self.wake.notify().expect("notify");
         wait_for("a rendezvous reply", || pending.receive().expect("receive").map(|r| *r.payload()))
+    }
+
+    /// Sends a rendezvous request and returns it in flight: its reply, once there,
+    /// is `pending.receive()`; dropping it gives the query up.
+    pub fn send(&self, header: RendezvousRequestHeader, records: &[WireDelta]) -> PendingRendezvous {
+        let mut loan = self.rendezvous.loan_slice_uninit(records.len()).expect("loan");
+        *loan.user_header_mut() = header;
+        let pending = loan.write_from_slice(records).send().expect("send");
+        self.wake.notify().expect("notify");
+        pending
     }
 
     /// Sends a rendezvous request and drops its pending reply at once, as a client

@@ -1,10 +1,12 @@
 //! `dyfosd --worker-nice N`: the search workers run N nice levels below the thread
 //! that answers requests, so cheap queries preempt running searches
-//! (`bench/RESULTS.md`, latency: mixed run). Linux only: read from `/proc`.
+//! (`bench/RESULTS.md`, latency: mixed run). By default the IPC thread sleeps at
+//! `SCHED_FIFO` 10 where the system allows it, else the workers are niced by 5
+//! (issue 15). Linux only: read from `/proc`.
 
 #![cfg(target_os = "linux")]
 
-use dyfos_tests::Sandbox;
+use dyfos_tests::{Sandbox, wait_for};
 
 /// Nice value of every thread of `pid`, by thread name.
 fn thread_nices(pid: u32) -> Vec<(String, i32)> {
@@ -19,6 +21,21 @@ fn thread_nices(pid: u32) -> Vec<(String, i32)> {
         }
     }
     out
+}
+
+/// Scheduling policy and real-time priority of the thread called `name` of `pid`.
+fn policy_of(pid: u32, name: &str) -> (u32, u32) {
+    for task in std::fs::read_dir(format!("/proc/{pid}/task")).expect("the daemon's threads").flatten() {
+        let comm = std::fs::read_to_string(task.path().join("comm")).unwrap_or_default().trim().to_string();
+        let stat = std::fs::read_to_string(task.path().join("stat")).unwrap_or_default();
+        let Some((_, rest)) = stat.rsplit_once(')') else { continue };
+        let fields: Vec<&str> = rest.split_whitespace().collect();
+        // rt_priority is field 40, policy 41.
+        if comm == name {
+            return (fields[38].parse().unwrap(), fields[37].parse().unwrap());
+        }
+    }
+    panic!("no thread {name} in {pid}")
 }
 
 fn workers_and_main(pid: u32) -> (Vec<i32>, i32) {
@@ -43,8 +60,29 @@ fn worker_nice_lowers_only_the_search_workers() {
     let sandbox = Sandbox::new("worker-nice-default");
     let daemon = sandbox.start_daemon(&[]);
     let (workers, main) = workers_and_main(daemon.pid());
-    assert!(
-        !workers.is_empty() && workers.iter().all(|n| *n == main),
-        "default keeps them equal: {workers:?} vs {main}"
-    );
+    if daemon.log().contains("real-time priority 10 refused") {
+        // No CAP_SYS_NICE / RLIMIT_RTPRIO here: the fallback.
+        assert!(workers.iter().all(|n| *n == (main + 5).min(19)), "fallback: {workers:?} vs {main}");
+    } else {
+        assert!(
+            !workers.is_empty() && workers.iter().all(|n| *n == main),
+            "default keeps them equal: {workers:?} vs {main}"
+        );
+        // Idle, the IPC thread sleeps real-time (SCHED_FIFO = 1, with
+        // SCHED_RESET_ON_FORK not shown in /proc); the workers stay SCHED_OTHER = 0.
+        wait_for("the IPC thread to sleep real-time", || (policy_of(daemon.pid(), "dyfosd") == (1, 10)).then_some(()));
+        assert_eq!(policy_of(daemon.pid(), "dyfos-worker-0"), (0, 0));
+        assert!(daemon.log().contains("SCHED_FIFO priority 10"), "{}", daemon.log());
+    }
+    drop(daemon);
+
+    // Off: the IPC thread stays normal.
+    let sandbox = Sandbox::new("ipc-priority-off");
+    let daemon = sandbox.start_daemon(&["--ipc-priority", "0"]);
+    let mut client = sandbox.client();
+    client.stats(dyfos_tests::PATIENCE).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    assert_eq!(policy_of(daemon.pid(), "dyfosd"), (0, 0));
+    let (workers, main) = workers_and_main(daemon.pid());
+    assert!(workers.iter().all(|n| *n == main), "{workers:?} vs {main}");
 }

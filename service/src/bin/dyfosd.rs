@@ -27,7 +27,7 @@ struct Cli {
     state_dir: Option<PathBuf>,
     /// TOML file with any of: prefix, state_dir, domain, workers, spin_us,
     /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s, model,
-    /// worker_nice.
+    /// worker_nice, ipc_priority, spin_max_us, queue, worker_batch.
     #[arg(long)]
     config: Option<PathBuf>,
     /// iceoryx2 file prefix: only processes of the same domain see each other (default iceoryx2's `iox2_`).
@@ -53,6 +53,27 @@ struct Cli {
     /// other processes. 10 suits a mix of cheap and long queries on few cores.
     #[arg(long, value_parser = clap::value_parser!(u8).range(0..=19))]
     worker_nice: Option<u8>,
+    /// SCHED_FIFO priority of the thread that answers requests while it sleeps,
+    /// 1–99 (default 10), so a request preempts running searches; 0 turns it off.
+    /// Needs CAP_SYS_NICE or `ulimit -r`; refused, the workers are niced by 5.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=99))]
+    ipc_priority: Option<u8>,
+    /// Longest time to keep polling after a request while traffic is steady, µs
+    /// (default 2000); 0 keeps to --spin-us always.
+    #[arg(long)]
+    spin_max_us: Option<u64>,
+    /// How free workers pick queued searches: `fair` (default: the client with the
+    /// fewest running first) or `fifo` (oldest first).
+    #[arg(long, value_parser = ["fair", "fifo"])]
+    queue: Option<String>,
+    /// Run the search workers as SCHED_BATCH.
+    #[arg(long)]
+    worker_batch: bool,
+    /// The scheduling of dyfosd before issue 15, for comparisons: no real-time IPC
+    /// thread, a fixed --spin-us window, a FIFO queue (same as `--ipc-priority 0
+    /// --spin-max-us 0 --queue fifo`; those flags win if given too).
+    #[arg(long)]
+    legacy_scheduling: bool,
 }
 
 /// The TOML file's keys; each is optional and a flag overrides it.
@@ -70,6 +91,10 @@ struct FileConfig {
     upload_idle_timeout_s: Option<u64>,
     model: Option<PathBuf>,
     worker_nice: Option<u8>,
+    ipc_priority: Option<u8>,
+    spin_max_us: Option<u64>,
+    queue: Option<String>,
+    worker_batch: Option<bool>,
 }
 
 fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
@@ -96,13 +121,31 @@ fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
             Some(n) if n > 19 => anyhow::bail!("worker_nice = {n} must be 0–19"),
             n => n.unwrap_or(d.worker_nice),
         },
+        ipc_priority: match cli.ipc_priority.or(file.ipc_priority) {
+            Some(n) if n > 99 => anyhow::bail!("ipc_priority = {n} must be 0–99"),
+            Some(n) => n,
+            None if cli.legacy_scheduling => 0,
+            None => d.ipc_priority,
+        },
+        spin_max: match cli.spin_max_us.or(file.spin_max_us) {
+            Some(us) => Duration::from_micros(us),
+            None if cli.legacy_scheduling => Duration::ZERO,
+            None => d.spin_max,
+        },
+        fair_queue: match cli.queue.as_deref().or(file.queue.as_deref()) {
+            Some("fair") => true,
+            Some("fifo") => false,
+            Some(q) => anyhow::bail!("queue = \"{q}\" must be \"fair\" or \"fifo\""),
+            None => d.fair_queue && !cli.legacy_scheduling,
+        },
+        worker_batch: cli.worker_batch || file.worker_batch.unwrap_or(d.worker_batch),
     })
 }
 
-/// Serves until SIGINT/SIGTERM: answer, keep polling for `config.spin` after the
-/// last request (the next one of a burst then costs no wake-up), then sleep.
+/// Serves until SIGINT/SIGTERM: answer, keep polling for the daemon's polling
+/// window after the last request (the next one of a burst or of steady traffic
+/// then costs no wake-up), then sleep.
 fn serve(mut daemon: Daemon) {
-    let spin = daemon.config().spin;
     let mut last_work = Instant::now();
     let mut rounds: u32 = 0;
     loop {
@@ -114,7 +157,7 @@ fn serve(mut daemon: Daemon) {
             }
             continue;
         }
-        if last_work.elapsed() < spin {
+        if last_work.elapsed() < daemon.poll_window() {
             if daemon.termination_requested() {
                 break;
             }
@@ -186,6 +229,15 @@ mod tests {
         assert_eq!(c.worker_nice, 0);
         assert_eq!(config(&cli(&["--worker-nice", "10"])).unwrap().worker_nice, 10);
         assert!(Cli::try_parse_from(["dyfosd", "--worker-nice", "20"]).is_err());
+        // Issue 15's defaults, the legacy switch, and flags over it.
+        let d = config(&cli(&[])).unwrap();
+        assert_eq!((d.ipc_priority, d.spin_max, d.fair_queue), (10, Duration::from_millis(2), true));
+        let legacy = config(&cli(&["--legacy-scheduling"])).unwrap();
+        assert_eq!((legacy.ipc_priority, legacy.spin_max, legacy.fair_queue), (0, Duration::ZERO, false));
+        let mixed = config(&cli(&["--legacy-scheduling", "--queue", "fair", "--ipc-priority", "3"])).unwrap();
+        assert_eq!((mixed.ipc_priority, mixed.fair_queue), (3, true));
+        assert!(Cli::try_parse_from(["dyfosd", "--queue", "lifo"]).is_err());
+        assert!(Cli::try_parse_from(["dyfosd", "--ipc-priority", "100"]).is_err());
         std::fs::write(&file, "prefx = \"typo/\"\n").unwrap();
         let err = format!("{:#}", config(&cli(&["--config", file.to_str().unwrap()])).unwrap_err());
         assert!(err.contains("unknown field `prefx`"), "{err}");

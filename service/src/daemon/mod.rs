@@ -26,7 +26,16 @@
 //! pool of worker threads, which reply to the client directly (the ports are the
 //! thread-safe iceoryx2 variant, so an accepted request can move to a worker). A
 //! `brute` query may hold at most all workers but one, so a cheap query from another
-//! client always finds a free worker.
+//! client always finds a free worker. Free workers take queries fairly across
+//! clients ([`DaemonConfig::fair_queue`]).
+//!
+//! Priorities (issue 15): the IPC thread sleeps at `SCHED_FIFO`
+//! ([`DaemonConfig::ipc_priority`]), so a request wakes it ahead of running
+//! searches, and polls for the next request at normal priority, for a window that
+//! grows to [`DaemonConfig::spin_max`] while traffic is steady and is zero while
+//! every worker searches. Real-time scheduling is per thread: call [`Daemon::spin`]
+//! and [`Daemon::wait`] on the thread that called [`Daemon::create`]. Where the
+//! system refuses it, the workers run [`FALLBACK_WORKER_NICE`] nice levels lower.
 //!
 //! A client that goes away mid-query (killed, or dropping its pending response)
 //! frees its worker: while searches run, the IPC thread looks every
@@ -38,7 +47,10 @@
 
 mod map;
 mod rendezvous;
+mod sched;
 mod stats;
+
+pub use sched::IpcScheduling;
 
 use crate::store::{Store, StoreOpenError};
 use dyfos_shared::limits::MAX_MAPS;
@@ -107,7 +119,34 @@ pub struct DaemonConfig {
     /// preempted at once, but also yield to every other process of normal priority
     /// (`bench/RESULTS.md`, latency: mixed run).
     pub worker_nice: u8,
+    /// `SCHED_FIFO` priority of the IPC thread while it sleeps (1–99,
+    /// `--ipc-priority`, default [`DEFAULT_IPC_PRIORITY`]; 0: never real-time). A
+    /// request then wakes it ahead of any running search; it polls at normal
+    /// priority. Needs `CAP_SYS_NICE` or an `RLIMIT_RTPRIO` of at least this; when
+    /// refused, the workers run [`FALLBACK_WORKER_NICE`] nice levels lower instead
+    /// (unless `worker_nice` is set).
+    pub ipc_priority: u8,
+    /// Longest polling window (`--spin-max-us`, default 2 ms; 0: always `spin`):
+    /// while requests arrive about this often or more, the IPC thread keeps polling
+    /// this long after each, so sparse but steady traffic pays no wake-up. Polling
+    /// stops while every worker searches (real-time only) and once traffic stops,
+    /// so an idle daemon uses no CPU.
+    pub spin_max: Duration,
+    /// Serve the search queue fairly across clients (`--queue fair`, default): a
+    /// free worker takes the oldest query of the client with the fewest searches
+    /// running, so one client with many queries in flight cannot make another
+    /// wait behind all of them. `false` (`--queue fifo`): first come, first served.
+    pub fair_queue: bool,
+    /// Run the search workers as `SCHED_BATCH` (`--worker-batch`; default off).
+    pub worker_batch: bool,
 }
+
+/// The IPC thread's default real-time priority: low among real-time threads, above
+/// every normal one.
+pub const DEFAULT_IPC_PRIORITY: u8 = 10;
+
+/// Nice levels the workers drop when the IPC thread may not run real-time.
+pub const FALLBACK_WORKER_NICE: u8 = 5;
 
 /// `$XDG_STATE_HOME/dyfos`, else `~/.local/state/dyfos`, else `./dyfos-state`.
 pub fn default_state_dir() -> PathBuf {
@@ -134,6 +173,10 @@ impl Default for DaemonConfig {
             upload_idle_timeout: Duration::from_secs(30),
             model: None,
             worker_nice: 0,
+            ipc_priority: DEFAULT_IPC_PRIORITY,
+            spin_max: Duration::from_millis(2),
+            fair_queue: true,
+            worker_batch: false,
         }
     }
 }
@@ -269,6 +312,15 @@ pub struct Daemon {
     last_housekeeping: Instant,
     last_client_check: Instant,
     closing: bool,
+    /// The IPC thread's real-time switch.
+    priority: sched::IpcPriority,
+    ipc_scheduling: IpcScheduling,
+    /// When requests last arrived, and the mean gap between arrivals (µs,
+    /// exponentially weighted), which sizes the polling window.
+    last_arrival: Instant,
+    arrival_gap_us: f64,
+    /// Whether every core is taken, looked up at most every [`IdleCores::EVERY`].
+    cores: sched::IdleCores,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -382,7 +434,7 @@ impl Daemon {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = if config.workers == 0 { cores } else { config.workers }.max(2);
         let shared = Arc::new(Shared {
-            queue: Mutex::new(rendezvous::Queue::new(threads)),
+            queue: Mutex::new(rendezvous::Queue::new(threads, config.fair_queue)),
             work: Condvar::new(),
             reply,
             stats: Mutex::new(stats::Stats::new()),
@@ -390,13 +442,33 @@ impl Daemon {
             watches: (0..threads).map(|_| rendezvous::Watch::new()).collect(),
             learned,
         });
-        let worker_nice = config.worker_nice.min(19);
+        // The IPC thread is this one: try real-time once, then poll-ready (normal)
+        // until the first wait. Threads it starts are normal (SCHED_RESET_ON_FORK).
+        let (mut priority, ipc_scheduling) = sched::IpcPriority::start(config.ipc_priority);
+        priority.lower();
+        let worker_nice = match (config.worker_nice, ipc_scheduling) {
+            (0, IpcScheduling::Refused) => FALLBACK_WORKER_NICE,
+            (n, _) => n.min(19),
+        };
+        let worker_batch = config.worker_batch;
+        info!(
+            workers = threads,
+            nice = worker_nice,
+            policy = if worker_batch { "SCHED_BATCH" } else { "SCHED_OTHER" },
+            fair_queue = config.fair_queue,
+            "search workers: {} nice level(s) below the IPC thread; queue served {}",
+            worker_nice,
+            if config.fair_queue { "fairly across clients" } else { "first come, first served" }
+        );
         let workers = (0..threads)
             .map(|i| {
                 let shared = Arc::clone(&shared);
                 std::thread::Builder::new()
                     .name(format!("dyfos-worker-{i}"))
                     .spawn(move || {
+                        if worker_batch && let Err(e) = sched::set_batch() {
+                            warn!("cannot make a search worker SCHED_BATCH ({e}); it stays SCHED_OTHER");
+                        }
                         lower_priority(worker_nice);
                         rendezvous::worker(&shared, i)
                     })
@@ -430,6 +502,11 @@ impl Daemon {
             last_housekeeping: Instant::now(),
             last_client_check: Instant::now(),
             closing: false,
+            priority,
+            ipc_scheduling,
+            last_arrival: Instant::now(),
+            arrival_gap_us: f64::INFINITY,
+            cores: sched::IdleCores::new(cores),
         })
     }
 
@@ -476,6 +553,13 @@ impl Daemon {
             if handled == before {
                 break;
             }
+        }
+        if handled > 0 {
+            let now = Instant::now();
+            let gap = (now - self.last_arrival).as_secs_f64() * 1e6;
+            self.last_arrival = now;
+            self.arrival_gap_us =
+                if self.arrival_gap_us.is_finite() { 0.875 * self.arrival_gap_us + 0.125 * gap } else { gap };
         }
         if self.last_housekeeping.elapsed() >= HOUSEKEEPING {
             self.housekeeping();
@@ -526,6 +610,36 @@ impl Daemon {
         }
     }
 
+    /// What scheduling the IPC thread got at start.
+    pub fn ipc_scheduling(&self) -> IpcScheduling {
+        self.ipc_scheduling
+    }
+
+    /// How long the IPC thread should keep polling after the last request before
+    /// it sleeps: [`DaemonConfig::spin_max`] while requests arrive about that often,
+    /// else [`DaemonConfig::spin`]. Unless real-time scheduling is off, zero while
+    /// every worker searches or no core is idle: a polling thread that yields waits
+    /// a whole time slice behind the busy ones, where a sleeping one is woken ahead
+    /// of them (real-time, or above the niced workers). A non-zero window returns
+    /// the thread to normal priority first, so its polling yields to every other
+    /// thread.
+    pub fn poll_window(&mut self) -> Duration {
+        let base = self.config.spin;
+        let steady = self.config.spin_max > base && self.arrival_gap_us <= self.config.spin_max.as_secs_f64() * 1e6;
+        let window = if steady { self.config.spin_max } else { base };
+        if window.is_zero() || self.ipc_scheduling == IpcScheduling::Off {
+            return window;
+        }
+        if self.shared.queue.lock().map_or(0, |q| q.running()) >= self.shared.threads || self.cores.busy() {
+            return Duration::ZERO;
+        }
+        self.priority.lower();
+        if self.priority.is_realtime() {
+            return Duration::ZERO;
+        }
+        window
+    }
+
     /// Whether SIGINT or SIGTERM arrived.
     pub fn termination_requested(&self) -> bool {
         self.node.wait(Duration::ZERO).is_err()
@@ -536,6 +650,7 @@ impl Daemon {
     /// sleeps at most [`CLIENT_CHECK`], so that [`Daemon::spin`] can see their
     /// clients go.
     pub fn wait(&mut self, timeout: Duration) -> WaitOutcome {
+        self.priority.raise();
         let timeout =
             if self.shared.queue.lock().map_or(0, |q| q.running()) > 0 { timeout.min(CLIENT_CHECK) } else { timeout };
         // Consume stale notifications first, then look once more: a request sent

@@ -28,7 +28,12 @@ pub(crate) struct Job {
     received: Instant,
     reply_to: u128,
     request_id: u64,
+    /// The client port that sent it: the unit of fairness of the queue.
+    client: ClientKey,
 }
+
+/// Which client port sent a query (its iceoryx2 `UniqueClientId`).
+type ClientKey = u128;
 
 /// One worker's running query, as the IPC thread sees it: the worker lends it the
 /// query's request for the time of the search, and the IPC thread raises `abandon`
@@ -73,7 +78,10 @@ impl Watch {
 }
 
 /// The queries waiting for workers, in two classes: `brute` (heavy) may occupy
-/// all workers but one, so a cheap query always finds a free worker.
+/// all workers but one, so a cheap query always finds a free worker. Within a
+/// class, a fair queue gives a free worker the oldest query of the client with the
+/// fewest searches running (so a client with many queries in flight takes its
+/// turn with the others); a FIFO one, the oldest query.
 pub(crate) struct Queue {
     light: VecDeque<Job>,
     heavy: VecDeque<Job>,
@@ -81,10 +89,14 @@ pub(crate) struct Queue {
     running_heavy: usize,
     heavy_limit: usize,
     closed: bool,
+    fair: bool,
+    /// Clients with searches running and how many each: at most one entry per
+    /// worker, allocated once.
+    running_by: Vec<(ClientKey, usize)>,
 }
 
 impl Queue {
-    pub(crate) fn new(threads: usize) -> Self {
+    pub(crate) fn new(threads: usize, fair: bool) -> Self {
         Queue {
             light: VecDeque::new(),
             heavy: VecDeque::new(),
@@ -92,6 +104,8 @@ impl Queue {
             running_heavy: 0,
             heavy_limit: threads.saturating_sub(1).max(1),
             closed: false,
+            fair,
+            running_by: Vec::with_capacity(threads),
         }
     }
 
@@ -128,22 +142,60 @@ impl Queue {
 
     /// The next job a free worker may take, and whether it is heavy.
     fn take(&mut self) -> Option<(Job, bool)> {
-        let (job, heavy) = if let Some(job) = self.light.pop_front() {
-            (job, false)
-        } else if self.running_heavy < self.heavy_limit {
-            (self.heavy.pop_front()?, true)
+        let (job, heavy) = if !self.light.is_empty() {
+            let i = self.next_of(false);
+            (self.light.remove(i)?, false)
+        } else if self.running_heavy < self.heavy_limit && !self.heavy.is_empty() {
+            let i = self.next_of(true);
+            (self.heavy.remove(i)?, true)
         } else {
             return None;
         };
         self.running += 1;
         self.running_heavy += usize::from(heavy);
+        match self.running_by.iter_mut().find(|(c, _)| *c == job.client) {
+            Some((_, n)) => *n += 1,
+            None => self.running_by.push((job.client, 1)),
+        }
         Some((job, heavy))
     }
 
-    fn finish(&mut self, heavy: bool) {
+    /// Index of the job to take next from one class's queue.
+    fn next_of(&self, heavy: bool) -> usize {
+        if !self.fair {
+            return 0;
+        }
+        let queue = if heavy { &self.heavy } else { &self.light };
+        fair_pick(queue.iter().map(|j| j.client), &self.running_by)
+    }
+
+    fn finish(&mut self, heavy: bool, client: ClientKey) {
         self.running -= 1;
         self.running_heavy -= usize::from(heavy);
+        if let Some(i) = self.running_by.iter().position(|(c, _)| *c == client) {
+            self.running_by[i].1 -= 1;
+            if self.running_by[i].1 == 0 {
+                self.running_by.swap_remove(i);
+            }
+        }
     }
+}
+
+/// Of queued jobs from `clients` (oldest first), the index of the first whose
+/// client has the fewest searches running (`running`: client and count; absent
+/// means none). 0 for an empty queue.
+fn fair_pick<K: PartialEq>(clients: impl Iterator<Item = K>, running: &[(K, usize)]) -> usize {
+    let mut best = (usize::MAX, 0);
+    for (i, client) in clients.enumerate() {
+        let n = running.iter().find(|(c, _)| *c == client).map_or(0, |(_, n)| *n);
+        if n < best.0 {
+            best = (n, i);
+            if n == 0 {
+                break;
+            }
+        }
+    }
+    best.1
 }
 
 /// Whether queries of `algorithm` are heavy: they may hold all workers but one,
@@ -176,10 +228,11 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
         // A bug in a search must not take the worker (and the shutdown's count of
         // queries in flight) with it; `run` answers `internal_error` for a panic in
         // the search itself, this catches the rest.
+        let client = job.client;
         if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(shared, watch, job))).is_err() {
             error!("a search panicked; its query was dropped");
         }
-        lock(&shared.queue).finish(heavy);
+        lock(&shared.queue).finish(heavy, client);
         // A heavy job may have become runnable.
         shared.work.notify_all();
     }
@@ -190,7 +243,7 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
 /// IPC thread through `watch`) abandons the search. Neither gets a reply, as nobody
 /// is there to receive it; an abandoned search is counted in the stats.
 fn run(shared: &Shared, watch: &Watch, job: Job) {
-    let Job { active, request, world, received, reply_to, request_id } = job;
+    let Job { active, request, world, received, reply_to, request_id, client: _ } = job;
     let deadline = request.deadline.map(|d| received + d);
     if !active.is_connected() {
         debug!(request_id, "client left before its query started; skipped");
@@ -352,7 +405,16 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
             send(&daemon.shared, &active, reply, reply_to);
         }
         Ok(Accepted::Queued(request, world)) => {
-            lock(&daemon.shared.queue).push(Job { active, request: *request, world, received, reply_to, request_id });
+            let client = active.origin().value();
+            lock(&daemon.shared.queue).push(Job {
+                active,
+                request: *request,
+                world,
+                received,
+                reply_to,
+                request_id,
+                client,
+            });
             daemon.shared.work.notify_one();
         }
     }
@@ -364,15 +426,30 @@ mod tests {
 
     #[test]
     fn heavy_jobs_leave_one_worker_free() {
-        let mut q = Queue::new(2);
+        let mut q = Queue::new(2, true);
         assert_eq!(q.heavy_limit, 1);
-        assert_eq!(Queue::new(8).heavy_limit, 7);
+        assert_eq!(Queue::new(8, false).heavy_limit, 7);
         assert_eq!(q.pending(), 0);
         q.running_heavy = 1;
         q.running = 1;
         // No heavy job can start while one runs on a 2-worker pool.
         assert!(q.take().is_none());
-        q.finish(true);
-        assert_eq!((q.running, q.running_heavy), (0, 0));
+        q.running_by.clear();
+        q.running_by.push((7, 1));
+        q.finish(true, 7);
+        assert_eq!((q.running, q.running_heavy, q.running_by.len()), (0, 0, 0));
+    }
+
+    #[test]
+    fn the_fair_pick_serves_the_client_with_fewest_searches_running() {
+        // Client 1 has two searches running and three queued; client 2 queued last.
+        let running = [(1, 2)];
+        assert_eq!(fair_pick([1, 1, 1, 2].into_iter(), &running), 3);
+        // Both running one: the oldest.
+        assert_eq!(fair_pick([2, 1].into_iter(), &[(1, 1), (2, 1)]), 0);
+        assert_eq!(fair_pick([1, 2, 3].into_iter(), &[(1, 3), (2, 1), (3, 2)]), 1);
+        // Nobody running: the oldest.
+        assert_eq!(fair_pick([5, 4].into_iter(), &[]), 0);
+        assert_eq!(fair_pick(std::iter::empty::<u8>(), &running), 0);
     }
 }

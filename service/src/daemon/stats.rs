@@ -8,6 +8,11 @@ use tracing::debug;
 /// Latencies kept for the percentiles.
 const WINDOW: usize = 4096;
 
+/// How stale the percentiles a `stats` reply carries may be: sorting the window
+/// costs tens of µs on the IPC thread, so a watchdog polling `stats` a thousand
+/// times a second must not pay it every time.
+const PERCENTILES_MAX_AGE: std::time::Duration = std::time::Duration::from_millis(20);
+
 /// Counters and the latency window.
 pub(crate) struct Stats {
     started: std::time::Instant,
@@ -19,6 +24,12 @@ pub(crate) struct Stats {
     errors: [u64; STATUS_SLOTS],
     latencies: Vec<u64>,
     next: usize,
+    /// The last percentiles, when they were computed, whether samples came since,
+    /// and the buffer they were sorted in (allocated once).
+    cached: [u64; 4],
+    computed: Option<std::time::Instant>,
+    dirty: bool,
+    scratch: Vec<u64>,
 }
 
 impl Stats {
@@ -33,6 +44,10 @@ impl Stats {
             errors: [0; STATUS_SLOTS],
             latencies: Vec::with_capacity(WINDOW),
             next: 0,
+            cached: [0; 4],
+            computed: None,
+            dirty: false,
+            scratch: Vec::with_capacity(WINDOW),
         }
     }
 
@@ -45,6 +60,7 @@ impl Stats {
             self.latencies[self.next] = micros;
         }
         self.next = (self.next + 1) % WINDOW;
+        self.dirty = true;
     }
 
     /// A query whose search was abandoned because its client had gone (no reply).
@@ -68,14 +84,24 @@ impl Stats {
         self.map_requests += 1;
     }
 
-    fn percentiles(&self) -> [u64; 4] {
+    /// p50, p90, p99 and max of the window, recomputed only when samples came and
+    /// the last computation is older than `max_age`.
+    fn percentiles(&mut self, max_age: std::time::Duration) -> [u64; 4] {
         if self.latencies.is_empty() {
             return [0; 4];
         }
-        let mut v = self.latencies.clone();
+        if !self.dirty || self.computed.is_some_and(|t| t.elapsed() < max_age) {
+            return self.cached;
+        }
+        let v = &mut self.scratch;
+        v.clear();
+        v.extend_from_slice(&self.latencies);
         v.sort_unstable();
         let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-        [at(0.5), at(0.9), at(0.99), v[v.len() - 1]]
+        self.cached = [at(0.5), at(0.9), at(0.99), v[v.len() - 1]];
+        self.computed = Some(std::time::Instant::now());
+        self.dirty = false;
+        self.cached
     }
 }
 
@@ -87,7 +113,7 @@ pub(super) fn on_request(
     let log = dyfos_client::logging::counters();
     let (queued, running) = daemon.shared.queue.lock().map_or((0, 0), |q| (q.queued() as u64, q.running() as u64));
     let reply = match daemon.shared.stats.lock() {
-        Ok(s) => StatsReply {
+        Ok(mut s) => StatsReply {
             request_id: request.request_id,
             pid: u64::from(std::process::id()),
             uptime_micros: u64::try_from(s.started.elapsed().as_micros()).unwrap_or(u64::MAX),
@@ -98,7 +124,7 @@ pub(super) fn on_request(
             queued,
             running,
             workers: daemon.shared.threads as u64,
-            latency_micros: s.percentiles(),
+            latency_micros: s.percentiles(PERCENTILES_MAX_AGE),
             latency_samples: s.latencies.len() as u64,
             errors_by_code: s.errors,
             queries_abandoned: s.queries_abandoned,
@@ -126,16 +152,19 @@ mod tests {
 
     #[test]
     fn percentiles_over_the_window() {
+        let fresh = std::time::Duration::ZERO;
         let mut s = Stats::new();
-        assert_eq!(s.percentiles(), [0; 4]);
+        assert_eq!(s.percentiles(fresh), [0; 4]);
         for v in 1..=100 {
             s.served(v);
         }
-        assert_eq!(s.percentiles(), [51, 90, 99, 100]);
+        assert_eq!(s.percentiles(fresh), [51, 90, 99, 100]);
         for _ in 0..WINDOW {
             s.served(7);
         }
-        assert_eq!(s.percentiles(), [7; 4]);
+        // Within the maximum age, the last figures; then the new ones.
+        assert_eq!(s.percentiles(std::time::Duration::from_secs(3600)), [51, 90, 99, 100]);
+        assert_eq!(s.percentiles(fresh), [7; 4]);
         s.failed(Status::UnknownMap);
         assert_eq!(s.errors[Status::UnknownMap as usize], 1);
     }

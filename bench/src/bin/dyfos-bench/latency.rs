@@ -11,7 +11,8 @@
 
 use anyhow::{Context, bail};
 use dyfos_bench::latency::{
-    Arrivals, FloorClient, Latencies, RequestSet, RunSamples, Workload, drive, in_process, map_id, serve_floor,
+    Arrivals, FloorClient, GREEDY_IN_FLIGHT, GreedyClient, Latencies, RequestSet, RunSamples, Workload, drive,
+    in_process, map_id, serve_floor,
 };
 use dyfos_bench::svg::{Series, line_plot};
 use dyfos_client::{Client, ClientConfig, RendezvousError};
@@ -77,6 +78,17 @@ pub struct LatencyArgs {
     /// event (`ClientConfig::spin`), µs; default: the client library's default.
     #[arg(long)]
     client_spin_us: Option<u64>,
+    /// Skip the runs of issue 15's goals (`stats` and map requests beside `dyfos`
+    /// clients, CPU hogs, a greedy client, idle CPU); they also run against the
+    /// `--compare-daemon-arg` daemon.
+    #[arg(long)]
+    skip_goals: bool,
+    /// Goals: seconds without traffic over which the daemon's idle CPU is measured.
+    #[arg(allow_hyphen_values = true, long, default_value_t = 30.0)]
+    idle_seconds: f64,
+    /// Goals: CPU hog processes beside the daemon (default: one per core).
+    #[arg(long)]
+    hogs: Option<usize>,
 }
 
 /// Flags of the hidden `latency-worker` mode: one client process.
@@ -112,7 +124,8 @@ pub struct WorkerArgs {
 }
 
 fn parse_workload(s: &str) -> Result<Workload, String> {
-    Workload::from_name(s).ok_or_else(|| format!("unknown workload `{s}`: use floor, null or dyfos"))
+    Workload::from_name(s)
+        .ok_or_else(|| format!("unknown workload `{s}`: use floor, null, dyfos, stats, map, greedy or hog"))
 }
 
 const TIMEOUT: Duration = Duration::from_secs(30);
@@ -155,7 +168,26 @@ pub fn worker(args: &WorkerArgs) -> anyhow::Result<()> {
             ready_then_go()?;
             drive(arrivals, duration, args.seed, stream, |_| floor.call(TIMEOUT))
         }
-        workload @ (Workload::Null | Workload::Dyfos) => {
+        Workload::Hog => {
+            ready_then_go()?;
+            let start = Instant::now();
+            let cpu0 = cpu_seconds(std::process::id()).unwrap_or(0.0);
+            let mut x = 0u64;
+            while start.elapsed() < duration {
+                for _ in 0..10_000 {
+                    x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+                }
+            }
+            let elapsed_s = start.elapsed().as_secs_f64();
+            let cpu_s = cpu_seconds(std::process::id()).unwrap_or(0.0) - cpu0;
+            RunSamples { elapsed_s, cpu_s, ..RunSamples::default() }
+        }
+        Workload::Greedy => {
+            let mut greedy = GreedyClient::open(&args.domain, &args.prefix).map_err(anyhow::Error::msg)?;
+            ready_then_go()?;
+            greedy.run(&set, args.index, duration).map_err(anyhow::Error::msg)?
+        }
+        workload @ (Workload::Null | Workload::Dyfos | Workload::Stats | Workload::Map) => {
             let defaults = ClientConfig::default();
             let config = ClientConfig {
                 prefix: args.prefix.clone(),
@@ -165,14 +197,17 @@ pub fn worker(args: &WorkerArgs) -> anyhow::Result<()> {
             };
             let mut client = Client::connect(&config)?;
             let mut call = |k: usize| {
-                let (_, request) = set.pick(args.index, k);
-                if workload == Workload::Null {
-                    client.check(request, TIMEOUT).map(|_| None).map_err(|e| error_name(&e))
-                } else {
-                    client.rendezvous(request, TIMEOUT).map(|a| Some(a.micros)).map_err(|e| error_name(&e))
+                let (i, request) = set.pick(args.index, k);
+                match workload {
+                    Workload::Null => client.check(request, TIMEOUT).map(|_| None).map_err(|e| error_name(&e)),
+                    Workload::Stats => client.stats(TIMEOUT).map(|_| None).map_err(|_| "stats_error".to_string()),
+                    Workload::Map => {
+                        client.snapshot(map_id(i), TIMEOUT).map(|_| None).map_err(|_| "map_error".to_string())
+                    }
+                    _ => client.rendezvous(request, TIMEOUT).map(|a| Some(a.micros)).map_err(|e| error_name(&e)),
                 }
             };
-            let warm_up = if workload == Workload::Null { 200 } else { 2 };
+            let warm_up = if workload == Workload::Dyfos { 2 } else { 200 };
             for k in 0..warm_up {
                 call(k).map_err(|e| anyhow::anyhow!("warm-up request failed: {e}"))?;
             }
@@ -284,6 +319,8 @@ struct Row {
     daemon_cpu: Option<f64>,
     /// `dyfos`: search time in the daemon, and end-to-end minus search.
     search: Option<Latencies>,
+    /// Hogs: the cores their processes used (CPU time / wall time, summed).
+    own_cpu: Option<f64>,
     overhead: Option<Latencies>,
     errors: BTreeMap<String, u64>,
     unsent: u64,
@@ -299,6 +336,8 @@ impl Row {
         let mut overhead: Vec<u64> = Vec::new();
         let mut errors = BTreeMap::new();
         let mut unsent = 0;
+        let own: f64 = runs.iter().filter(|r| r.elapsed_s > 0.0).map(|r| r.cpu_s / r.elapsed_s).sum();
+        let own_cpu = (group.workload == Workload::Hog).then_some(own);
         for r in runs {
             if r.search_us.len() == r.latency_ns.len() {
                 for (ns, us) in r.latency_ns.iter().zip(&r.search_us) {
@@ -323,6 +362,7 @@ impl Row {
             latency: Latencies::of_nanos(&mut latency),
             late: Latencies::of_nanos(&mut late),
             search: Latencies::of_nanos(&mut search),
+            own_cpu,
             overhead: Latencies::of_nanos(&mut overhead),
             errors,
             unsent,
@@ -544,10 +584,15 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
         daemon_pid: std::cell::Cell::new(0),
     };
     let load_before = load_average();
-    let result = run_with_daemon(&b, &dyfosd).and_then(|(mut report, rows, shutdown)| {
+    let result = run_with_daemon(&b, &dyfosd).and_then(|(mut report, rows, shutdown, idle)| {
+        let mut compared = None;
         if !args.compare_daemon_args.is_empty() {
-            let baseline = run_baseline(&b, &dyfosd)?;
+            let (baseline, idle) = run_baseline(&b, &dyfosd)?;
             report.push_str(&before_after(&rows, &baseline, &args.compare_daemon_args));
+            compared = Some((baseline, idle));
+        }
+        if !args.skip_goals {
+            report.push_str(&goals(args, &rows, idle, compared.as_ref().map(|(r, i)| (r.as_slice(), *i))));
         }
         Ok((report, rows, shutdown))
     });
@@ -565,7 +610,7 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-type Outcome = (String, Vec<Row>, String);
+type Outcome = (String, Vec<Row>, String, Option<f64>);
 
 /// What the daemon itself measured (receipt to reply) over exactly one configuration.
 #[derive(Debug, Clone, Copy)]
@@ -628,7 +673,10 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
                 result?;
                 served.map_err(anyhow::Error::msg)?;
             }
-            Workload::Null | Workload::Dyfos => {
+            Workload::Greedy | Workload::Hog => {
+                bail!("`{}` runs only in the goals (leave it out of --workloads)", w.name())
+            }
+            Workload::Null | Workload::Dyfos | Workload::Stats | Workload::Map => {
                 for n in &a.clients {
                     let before = client.stats(TIMEOUT)?.queries_served;
                     rows.push(b.run_config(Group::closed(*w, *n))?);
@@ -656,6 +704,17 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
             Group::open(Workload::Null, 1, a.mixed_null_rate),
             Group::closed(Workload::Dyfos, a.mixed_dyfos_clients),
         ])?);
+    }
+    let mut idle = None;
+    if !a.skip_goals {
+        let mut groups = goal_groups(a);
+        if let Some(h) = goal_hogs(a) {
+            groups.insert(0, vec![Group::closed(Workload::Hog, h)]);
+        }
+        for g in groups {
+            rows.extend(b.run_groups(&g)?);
+        }
+        idle = measure_idle(b, daemon.id());
     }
     let stats = client.stats(TIMEOUT)?;
     drop(client);
@@ -708,7 +767,44 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
         stats.queries_served, stats.requests_failed,
     );
     rows.extend(baselines.into_iter().map(|(_, r)| Row { clients: 0, ..r }));
-    Ok((report, rows, shutdown))
+    Ok((report, rows, shutdown, idle))
+}
+
+/// Hog processes of the goals: `--hogs`, default one per core; `None` for 0.
+fn goal_hogs(a: &LatencyArgs) -> Option<usize> {
+    let h = a.hogs.unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()));
+    (h > 0).then_some(h)
+}
+
+/// The configurations of issue 15's goals that both daemons run (the null mix is
+/// the mixed run): `stats` and map requests beside the `dyfos` clients, those
+/// clients alone and beside CPU hogs, and a greedy client beside one `dyfos` client.
+fn goal_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
+    let n = a.mixed_dyfos_clients.max(1);
+    let rate = if a.mixed_null_rate > 0.0 { a.mixed_null_rate } else { 1000.0 };
+    let mut g = vec![
+        vec![Group::open(Workload::Stats, 1, rate), Group::closed(Workload::Dyfos, n)],
+        vec![Group::open(Workload::Map, 1, rate), Group::closed(Workload::Dyfos, n)],
+        vec![Group::closed(Workload::Dyfos, n)],
+    ];
+    if let Some(h) = goal_hogs(a) {
+        g.push(vec![Group::closed(Workload::Hog, h), Group::closed(Workload::Dyfos, n)]);
+    }
+    g.push(vec![Group::closed(Workload::Greedy, 1), Group::closed(Workload::Dyfos, 1)]);
+    g
+}
+
+/// The daemon's CPU use over `--idle-seconds` without traffic, in cores.
+fn measure_idle(b: &Bench, pid: u32) -> Option<f64> {
+    let secs = b.args.idle_seconds;
+    if !(secs > 0.0 && secs.is_finite()) {
+        return None;
+    }
+    eprintln!("latency: {secs} s idle");
+    let start = Instant::now();
+    let before = cpu_seconds(pid)?;
+    std::thread::sleep(Duration::from_secs_f64(secs));
+    Some((cpu_seconds(pid)? - before) / start.elapsed().as_secs_f64())
 }
 
 /// The configurations of the before/after comparison.
@@ -726,8 +822,9 @@ fn baseline_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
     configs
 }
 
-/// Runs [`baseline_groups`] against a daemon started with `--compare-daemon-arg`s.
-fn run_baseline(b: &Bench, dyfosd: &Path) -> anyhow::Result<Vec<Row>> {
+/// Runs [`baseline_groups`] (and the goals' groups and idle time) against a daemon
+/// started with `--compare-daemon-arg`s.
+fn run_baseline(b: &Bench, dyfosd: &Path) -> anyhow::Result<(Vec<Row>, Option<f64>)> {
     let a = b.args;
     let set = RequestSet::new(a.seed, a.maps);
     let state = b.tmp.join("state-baseline");
@@ -740,20 +837,27 @@ fn run_baseline(b: &Bench, dyfosd: &Path) -> anyhow::Result<Vec<Row>> {
     for groups in baseline_groups(a) {
         rows.extend(b.run_groups(&groups)?);
     }
+    let mut idle = None;
+    if !a.skip_goals {
+        for groups in goal_groups(a) {
+            rows.extend(b.run_groups(&groups)?);
+        }
+        idle = measure_idle(b, daemon.id());
+    }
     let status = stop_daemon(&mut daemon)?;
     if !status.success() {
         bail!("the second dyfosd did not stop cleanly ({status})");
     }
-    Ok(rows)
+    Ok((rows, idle))
 }
 
 /// The same configurations with the first daemon (before) and the second (after).
 fn before_after(before: &[Row], after: &[Row], flags: &[String]) -> String {
     let mut out = format!(
-        "\n### The same configurations, same run: dyfosd as above (before) and with `{}` (after)\n\n",
+        "\n### The same configurations, same run: dyfosd as above (left) and with `{}` (right)\n\n",
         flags.join(" ")
     );
-    out.push_str("| configuration | before: answered /s | p50 µs | p99 µs | dyfosd CPU | after: answered /s | p50 µs | p99 µs | dyfosd CPU |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    out.push_str("| configuration | answered /s | p50 µs | p99 µs | dyfosd CPU | with the flags: answered /s | p50 µs | p99 µs | dyfosd CPU |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     let same = |x: &Row, y: &Row| {
         x.workload == y.workload && x.clients == y.clients && x.rate == y.rate && x.alongside == y.alongside
     };
@@ -769,6 +873,148 @@ fn before_after(before: &[Row], after: &[Row], flags: &[String]) -> String {
         }
         let _ = writeln!(out, "| {what} | {} | {} |", cells(b), cells(a));
     }
+    out
+}
+
+/// The row of `w` with `clients` at `rate`, run beside a group of `beside` (or
+/// alone); the last such row, the one run nearest the goals' other runs.
+fn pick(rows: &[Row], w: Workload, clients: usize, rate: Option<f64>, beside: Option<Workload>) -> Option<&Row> {
+    rows.iter().rev().find(|r| {
+        r.workload == w
+            && r.clients == clients
+            && r.rate == rate
+            && match (beside, &r.alongside) {
+                (None, None) => true,
+                (Some(o), Some(text)) => text.split(" + ").any(|g| g.starts_with(&format!("{} ", o.name()))),
+                _ => false,
+            }
+    })
+}
+
+/// One goal's cell from a daemon's rows and idle CPU: the text, and whether met.
+type GoalCell<'a> = dyn Fn(&[Row], Option<f64>) -> (String, Option<bool>) + 'a;
+
+/// Issue 15's goals, one row each, for the daemon of the run and (if any) the
+/// `--compare-daemon-arg` one; "met" is for the first.
+fn goals(a: &LatencyArgs, rows: &[Row], idle: Option<f64>, other: Option<(&[Row], Option<f64>)>) -> String {
+    let n = a.mixed_dyfos_clients.max(1);
+    let rate = if a.mixed_null_rate > 0.0 { a.mixed_null_rate } else { 1000.0 };
+    let flags = a.compare_daemon_args.join(" ");
+    let mut out = String::from("\n### Targets of issue 15 (cheap requests while searches run)\n\n");
+    if other.is_some() {
+        let _ = writeln!(out, "| target | dyfosd as above | with `{flags}` | met |\n|---|---|---|---|");
+    } else {
+        out.push_str("| target | measured | met |\n|---|---|---|\n");
+    }
+    let yes = |ok: Option<bool>| match ok {
+        Some(true) => "yes",
+        Some(false) => "**no**",
+        None => "–",
+    };
+    let mut line = |target: String, cell: &GoalCell| {
+        let (mine, ok) = cell(rows, idle);
+        match other {
+            Some((o, oi)) => {
+                let _ = writeln!(out, "| {target} | {mine} | {} | {} |", cell(o, oi).0, yes(ok));
+            }
+            None => {
+                let _ = writeln!(out, "| {target} | {mine} | {} |", yes(ok));
+            }
+        }
+    };
+    let lat = |l: Option<Latencies>| {
+        l.map_or("–".to_string(), |l| format!("p50 {} µs, p99 {} µs", us(l.p50_us), us(l.p99_us)))
+    };
+    for w in [Workload::Null, Workload::Stats, Workload::Map] {
+        line(
+            format!(
+                "{} requests ({rate:.0}/s, open loop) beside {n} clients running `dyfos` back to back: p50 ≤ 50 µs, p99 ≤ 1 ms",
+                w.name()
+            ),
+            &|r, _| {
+                let l = pick(r, w, 1, Some(rate), Some(Workload::Dyfos)).and_then(|r| r.latency);
+                (lat(l), l.map(|l| l.p50_us <= 50.0 && l.p99_us <= 1000.0))
+            },
+        );
+    }
+    // The dyfos clients' throughput beside the cheap requests, summed over the three runs.
+    let beside_cheap = |r: &[Row]| -> Option<f64> {
+        [Workload::Null, Workload::Stats, Workload::Map]
+            .iter()
+            .map(|w| pick(r, Workload::Dyfos, n, None, Some(*w)).map(|x| x.throughput))
+            .sum()
+    };
+    let theirs = other.and_then(|(o, _)| beside_cheap(o));
+    line(
+        format!("`dyfos` throughput of those {n} clients within 10 % of the other daemon's (sum over the three runs)"),
+        &|r, _| match (beside_cheap(r), theirs) {
+            (Some(x), Some(y)) if y > 0.0 => (format!("{x:.0}/s ({:.2} × {y:.0}/s)", x / y), Some(x >= 0.9 * y)),
+            (Some(x), _) => (format!("{x:.0}/s"), None),
+            _ => ("–".into(), None),
+        },
+    );
+    if let Some(&r0) = a.null_rates.first() {
+        let c = a.open_clients;
+        line(
+            format!("sparse: null open loop {r0:.0}/s over {c} client(s): p50 ≤ 10 µs, p99 ≤ 100 µs"),
+            &|r, _| {
+                let row = pick(r, Workload::Null, c, Some(r0), None);
+                let l = row.and_then(|r| r.latency);
+                let cpu = row.map_or(String::new(), |r| format!("; dyfosd CPU {}", cpu_cell(r)));
+                (format!("{}{cpu}", lat(l)), l.map(|l| l.p50_us <= 10.0 && l.p99_us <= 100.0))
+            },
+        );
+    }
+    line(format!("idle: dyfosd CPU over {} s without traffic ≤ 1 % of a core", a.idle_seconds), &|_, i| match i {
+        Some(c) => (format!("{:.2} %", c * 100.0), Some(c <= 0.01)),
+        None => ("–".into(), None),
+    });
+    if let Some(h) = goal_hogs(a) {
+        let hogs_alone = pick(rows, Workload::Hog, h, None, None).and_then(|r| r.own_cpu);
+        line(
+            format!(
+                "CPU hog: {h} hog process(es) beside {n} `dyfos` clients: each side keeps ≥ ⅓ of what it gets alone (no starvation)"
+            ),
+            &|r, _| {
+                let alone = pick(r, Workload::Dyfos, n, None, None).map(|x| x.throughput);
+                let with = pick(r, Workload::Dyfos, n, None, Some(Workload::Hog)).map(|x| x.throughput);
+                let hog = pick(r, Workload::Hog, h, None, Some(Workload::Dyfos)).and_then(|x| x.own_cpu);
+                match (alone, with, hog, hogs_alone) {
+                    (Some(al), Some(w), Some(hc), Some(ha)) if al > 0.0 && ha > 0.0 => (
+                        format!(
+                            "`dyfos` {w:.0}/s = {:.2} × alone; hogs {hc:.2} cores = {:.2} × alone",
+                            w / al,
+                            hc / ha
+                        ),
+                        Some(w / al >= 1.0 / 3.0 && hc / ha >= 1.0 / 3.0),
+                    ),
+                    _ => ("–".into(), None),
+                }
+            },
+        );
+    }
+    line(
+        format!(
+            "greedy client ({GREEDY_IN_FLIGHT} `dyfos` queries in flight) beside one `dyfos` client: the second's p50 ≤ 2 × its p50 alone"
+        ),
+        &|r, _| {
+            let alone = pick(r, Workload::Dyfos, 1, None, None).and_then(|x| x.latency);
+            let victim = pick(r, Workload::Dyfos, 1, None, Some(Workload::Greedy));
+            let greedy = pick(r, Workload::Greedy, 1, None, Some(Workload::Dyfos)).map_or(0.0, |x| x.throughput);
+            match (victim.and_then(|v| v.latency), alone) {
+                (Some(v), Some(al)) => (
+                    format!(
+                        "{} ({:.1} × alone {} µs); greedy {greedy:.0}/s",
+                        lat(Some(v)),
+                        v.p50_us / al.p50_us,
+                        us(al.p50_us)
+                    ),
+                    Some(v.p50_us <= 2.0 * al.p50_us),
+                ),
+                _ => ("–".into(), None),
+            }
+        },
+    );
     out
 }
 

@@ -1,0 +1,121 @@
+//! Cheap requests do not wait for searches (issue 15): with every worker busy
+//! searching (and one more query queued), a check-mode query, a `stats` request
+//! and a map snapshot are each answered while all the searches are still
+//! unanswered; and a queued query of a second client is taken before the queued
+//! one of a client that already has searches running (the fair queue).
+//!
+//! The searches run on a map whose voxel grid spans the whole search space at
+//! 5 cm (as in `daemon_abandon.rs`), with a 10-minute deadline: far longer than
+//! anything here waits. Nothing is timed: the assertions are on which replies
+//! exist at a point of the exchange. The searches are given up at the end (their
+//! pending replies dropped), which frees the workers.
+
+use dyfos_client::prelude::*;
+use dyfos_shared::wire::rendezvous::Mode;
+use dyfos_tests::{PATIENCE, PendingRendezvous, RawClient, Sandbox, data, wait_for};
+use std::time::Duration;
+
+const SCENARIO: &str = "golden/scenarios/hard/hard_01.json";
+
+fn scenario() -> Scenario {
+    Scenario::from_json(&std::fs::read_to_string(data(SCENARIO)).unwrap()).unwrap()
+}
+
+/// `hard_01`'s world with a fine voxel grid over the whole search space: every
+/// sight line walks hundreds of cells, so a search takes seconds at least.
+fn slow_world() -> World {
+    let resolution = 0.05;
+    let (cells_xy, cells_z) = ((24.0 / resolution) as i64, (12.0 / resolution) as i64);
+    let voxels = MapDelta::SetVoxels {
+        resolution,
+        origin: na::Point3::new(-12.0, -12.0, 0.0),
+        cells: vec![[0, 0, 0], [cells_xy - 1, cells_xy - 1, cells_z - 1]],
+        occupied: true,
+    };
+    scenario().world.apply(&[voxels]).unwrap()
+}
+
+/// A long search of map 1.
+fn search(algorithm: Algorithm, seed: u64) -> RendezvousRequest {
+    let s = scenario();
+    RendezvousRequest {
+        algorithm,
+        seed,
+        params: s.params,
+        deadline: Some(Duration::from_secs(600)),
+        ..RendezvousRequest::new(1, s.belief)
+    }
+}
+
+fn send(raw: &RawClient, request: &RendezvousRequest, id: u64) -> PendingRendezvous {
+    raw.send(request.header(Mode::Solve, id, [0, 0]), &request.records())
+}
+
+/// The searches that have been answered so far.
+fn answered(pending: &[PendingRendezvous]) -> usize {
+    pending.iter().filter(|p| p.receive().expect("receive").is_some()).count()
+}
+
+#[test]
+fn cheap_requests_are_answered_while_every_worker_searches() {
+    let sandbox = Sandbox::new("cheap-first");
+    let _daemon = sandbox.start_daemon(&["--workers", "2"]);
+    let mut admin = sandbox.client();
+    admin.upload_map(1, &slow_world(), false, PATIENCE).unwrap();
+
+    // Two raw clients, each connected (one round trip) before anything is timed by
+    // order. The first sends a brute search (it may hold all workers but one) and
+    // two `dyfos` searches (one takes the other worker, one waits).
+    let greedy = RawClient::open(&sandbox);
+    let other = RawClient::open(&sandbox);
+    for raw in [&greedy, &other] {
+        let reply = raw.rendezvous(search(Algorithm::Dyfos, 0).header(Mode::Check, 9, [0, 0]), &[]);
+        assert_eq!(reply.status, 0, "{reply:?}");
+    }
+    let pending = vec![
+        send(&greedy, &search(Algorithm::Brute, 1), 1),
+        send(&greedy, &search(Algorithm::Dyfos, 2), 2),
+        send(&greedy, &search(Algorithm::Dyfos, 3), 3),
+    ];
+    wait_for("both workers to search with one query queued", || {
+        let s = admin.stats(PATIENCE).unwrap();
+        (s.running == 2 && s.queued == 1).then_some(())
+    });
+
+    // Each cheap request is answered while no search is.
+    let check = admin.check(&search(Algorithm::Dyfos, 4), PATIENCE).unwrap();
+    assert_eq!(answered(&pending), 0, "a search finished before the check-mode query was answered");
+    assert_eq!(check.map_version, admin.snapshot(1, PATIENCE).unwrap().version());
+    assert_eq!(answered(&pending), 0, "a search finished before the map snapshot was answered");
+    let stats = admin.stats(PATIENCE).unwrap();
+    assert_eq!(answered(&pending), 0, "a search finished before the stats request was answered");
+    assert_eq!((stats.running, stats.queued, stats.queries_served), (2, 1, 0), "{stats:?}");
+
+    // A second client's query, queued after the first client's: a fair queue gives
+    // it the next free worker. Free one by giving up the running `dyfos` search of
+    // the first client (the daemon abandons it); its queued `dyfos` then stays
+    // queued behind the second client's.
+    let second = send(&other, &search(Algorithm::Dyfos, 5), 5);
+    wait_for("the second client's query to queue", || (admin.stats(PATIENCE).unwrap().queued == 2).then_some(()));
+    let mut pending = pending;
+    drop(pending.remove(1));
+    wait_for("the given-up search to be abandoned and a worker to take the next query", || {
+        let s = admin.stats(PATIENCE).unwrap();
+        (s.queries_abandoned == 1 && s.running == 2 && s.queued == 1).then_some(())
+    });
+    // So the second client's search is the one running: giving it up abandons a
+    // search. (First come, first served, it would still be queued, behind the
+    // first client's, and nothing would be abandoned.)
+    assert!(second.receive().unwrap().is_none(), "the second client's search runs (10-minute deadline)");
+    drop(second);
+    wait_for("the second client's running search to be abandoned", || {
+        (admin.stats(PATIENCE).unwrap().queries_abandoned == 2).then_some(())
+    });
+
+    // Give the rest up: the workers go idle.
+    drop(pending);
+    wait_for("the searches to be abandoned", || {
+        let s = admin.stats(PATIENCE).unwrap();
+        (s.running == 0 && s.queued == 0).then_some(())
+    });
+}
