@@ -134,8 +134,10 @@ fn main() {
     let mut links = [start_link(ROVER), start_link(VIEWER)];
 
     let stop = Arc::new(AtomicBool::new(false));
-    let responders =
-        [responder(prefix.clone(), viewer_domain.clone(), stop.clone()), responder(prefix.clone(), local.clone(), stop.clone())];
+    let responders = [
+        responder(prefix.clone(), viewer_domain.clone(), stop.clone()),
+        responder(prefix.clone(), local.clone(), stop.clone()),
+    ];
     std::thread::sleep(Duration::from_millis(300));
 
     // One domain, no link: the baseline.

@@ -193,7 +193,8 @@ fn disturbed_mission(
 
 #[test]
 fn a_3_s_outage_costs_at_most_the_step_it_hits() {
-    let Some((events, _, _)) = disturbed_mission("outage-3s", "2", |hosts, _, _, _, _| {
+    // Time scale 1: legs of 6 s or more, longer than the outage and the reconnection.
+    let Some((events, _, _)) = disturbed_mission("outage-3s", "1", |hosts, _, _, _, _| {
         hosts.set_link(false);
         std::thread::sleep(Duration::from_secs(3));
         hosts.set_link(true);
@@ -332,4 +333,31 @@ fn a_third_host_without_the_credentials_cannot_publish_a_measurement() {
     assert!(rover_link.terminate().success());
     let log = rover_link.log();
     assert!(log.contains("received=0"), "the rover's link handed nothing on:\n{log}");
+}
+
+#[test]
+fn demo_on_two_hosts_prints_the_one_host_table() {
+    // Only to print SKIPPED when not root; the demo makes its own namespaces.
+    let Some(_probe) = Hosts::create("demo-hosts-2", false) else { return };
+    let sandbox = Sandbox::new("hosts-demo");
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let table = |hosts: &str| {
+        let out_dir = sandbox.state_dir.with_extension(format!("demo-{hosts}"));
+        let out = std::process::Command::new(dyfos_tests::bin("dyfos"))
+            .args(["demo", "--time-scale", "0", "--algos", "dyfos,center", "--seed", "2", "--hosts", hosts])
+            .arg("--mission")
+            .arg(&files.mission)
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+        assert!(out.status.success(), "--hosts {hosts}: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+        let _ = std::fs::remove_dir_all(&out_dir);
+        let start = stdout.find("APE (cm)").expect("a table");
+        stdout[start..].lines().take(6).map(str::to_string).collect::<Vec<_>>()
+    };
+    let (one, two) = (table("1"), table("2"));
+    assert_eq!(one.len(), 6);
+    assert_eq!(one, two, "the two-host demo's table differs from the one-host one");
 }
