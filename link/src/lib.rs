@@ -43,6 +43,7 @@
 //! user, on the listening side); anything else is denied. The traffic itself is
 //! not encrypted: on an untrusted radio, run the link over a VPN (or add Zenoh's
 //! TLS transport, `transport_tls`, not built here).
+#![warn(missing_docs)]
 
 use dyfos_client::mission::topics::{MAX_BUFFER, TopicOpenError, Topics, TopicsConfig};
 use dyfos_shared::wire::mission::{
