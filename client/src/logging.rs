@@ -76,7 +76,20 @@ pub fn counters() -> LogCounters {
 /// (default `Warn`), since at `info` it reports every port it opens. A second call
 /// does nothing.
 pub fn init() {
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    init_with("info", &[]);
+}
+
+/// [`init`] with `default` as the filter when `RUST_LOG` is unset, and the `debug`
+/// lines of the targets starting with one of `limited` always shown but
+/// rate-limited like the rest: for a library that reports what a peer did (a
+/// refused login) only at `debug`.
+pub fn init_with(default: &str, limited: &'static [&'static str]) {
+    let _ = LIMITED_DEBUG.set(limited);
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default));
+    let filter = limited.iter().fold(filter, |f, target| match format!("{target}=debug").parse() {
+        Ok(directive) => f.add_directive(directive),
+        Err(_) => f,
+    });
     let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
     let fields = tracing_subscriber::fmt::format::debug_fn(|w, field, value| {
         let mut text = String::new();
@@ -104,6 +117,9 @@ pub fn init() {
 pub fn flush() {
     limiter().flush(Instant::now() + WINDOW);
 }
+
+/// Targets whose `debug` lines are rate-limited too (see [`init_with`]).
+static LIMITED_DEBUG: OnceLock<&'static [&'static str]> = OnceLock::new();
 
 fn limiter() -> &'static RateLimit {
     static LIMITER: OnceLock<RateLimit> = OnceLock::new();
@@ -225,7 +241,8 @@ impl<S: Subscriber> Layer<S> for RateLimit {
     fn event_enabled(&self, event: &Event<'_>, _ctx: Context<'_, S>) -> bool {
         let meta = event.metadata();
         let level = *meta.level();
-        if level > Level::INFO {
+        let limited = || LIMITED_DEBUG.get().is_some_and(|t| t.iter().any(|t| meta.target().starts_with(t)));
+        if level > Level::INFO && !(level == Level::DEBUG && limited()) {
             return true; // debug and trace: troubleshooting, everything
         }
         if level <= Level::WARN {

@@ -12,6 +12,7 @@
 //! drop(daemon);
 //! ```
 
+pub mod hosts;
 pub mod mission;
 pub mod soak;
 

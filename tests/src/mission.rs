@@ -14,6 +14,7 @@
 //! assert!(viewer.wait_exit().success());
 //! ```
 
+use crate::hosts::{Hosts, ROVER, VIEWER};
 use crate::{Sandbox, bin, wait_for};
 use dyfos_client::eval::Recorder;
 use dyfos_client::mission::Mission;
@@ -67,6 +68,7 @@ pub struct MissionFiles<'a> {
     /// The mission file.
     pub mission: PathBuf,
     dir: PathBuf,
+    logs: std::sync::atomic::AtomicU32,
 }
 
 impl<'a> MissionFiles<'a> {
@@ -76,12 +78,15 @@ impl<'a> MissionFiles<'a> {
         std::fs::create_dir_all(&dir).expect("mission dir");
         let path = dir.join("mission.json");
         std::fs::write(&path, mission.to_json()).expect("write mission");
-        MissionFiles { sandbox, mission: path, dir }
+        MissionFiles { sandbox, mission: path, dir, logs: Default::default() }
     }
 
     fn command(&self, binary: &str, name: &str, seed: u64, time_scale: &str) -> Command {
-        let mut cmd = Command::new(bin(binary));
-        cmd.args(["--prefix", &self.sandbox.prefix, "--domain", &self.sandbox.domain, "--mission-name", name])
+        self.command_on(Command::new(bin(binary)), &self.sandbox.domain, name, seed, time_scale)
+    }
+
+    fn command_on(&self, mut cmd: Command, domain: &str, name: &str, seed: u64, time_scale: &str) -> Command {
+        cmd.args(["--prefix", &self.sandbox.prefix, "--domain", domain, "--mission-name", name])
             .arg("--mission")
             .arg(&self.mission)
             .args(["--seed", &seed.to_string(), "--time-scale", time_scale])
@@ -112,6 +117,62 @@ impl<'a> MissionFiles<'a> {
         let mut cmd = self.command("dyfos-rover", name, seed, time_scale);
         cmd.args(["--viewer-timeout", "30"]).args(extra);
         self.spawn(cmd, &format!("{name}-rover"))
+    }
+
+    /// The iceoryx2 domain of the rover's host in a two-host test (the viewer's
+    /// host, with the daemon and the recorder, is the sandbox's own domain).
+    pub fn rover_domain(&self) -> String {
+        format!("dyr{}", &self.sandbox.domain[3..])
+    }
+
+    /// The mission's credentials file for `dyfos-link` (written on first use).
+    pub fn credentials(&self) -> PathBuf {
+        let path = self.dir.join("crew.credentials");
+        if !path.exists() {
+            std::fs::write(&path, format!("crew:secret-{}-{}\n", std::process::id(), self.sandbox.prefix.len()))
+                .expect("write credentials");
+        }
+        path
+    }
+
+    /// Starts `dyfos-rover` on the rover's host of `hosts`, in its own domain.
+    pub fn rover_on(&self, hosts: &Hosts, name: &str, seed: u64, time_scale: &str, extra: &[&str]) -> Robot {
+        let domain = self.rover_domain();
+        let mut cmd = self.command_on(hosts.command(ROVER, &bin("dyfos-rover")), &domain, name, seed, time_scale);
+        cmd.args(["--viewer-timeout", "30"]).args(extra);
+        self.spawn(cmd, &format!("{name}-rover"))
+    }
+
+    /// Starts `dyfos-viewer` on the viewer's host of `hosts` (the sandbox's domain and daemon).
+    pub fn viewer_on(&self, hosts: &Hosts, name: &str, algo: &str, seed: u64, extra: &[&str]) -> Robot {
+        let mut cmd =
+            self.command_on(hosts.command(VIEWER, &bin("dyfos-viewer")), &self.sandbox.domain, name, seed, "0");
+        cmd.args(["--algo", algo, "--connect-timeout", "30", "--observe-timeout", "30"]).args(extra);
+        self.spawn(cmd, &format!("{name}-viewer-{}", self.next_log()))
+    }
+
+    /// Starts `dyfos-link` on `host` of `hosts` (`ROVER` listens, `VIEWER` connects),
+    /// with the mission's credentials; `what` names its log.
+    pub fn link_on(&self, hosts: &Hosts, host: usize, name: &str, extra: &[&str]) -> Robot {
+        let mut cmd = hosts.command(host, &bin("dyfos-link"));
+        let (side, domain) =
+            if host == ROVER { ("rover", self.rover_domain()) } else { ("viewer", self.sandbox.domain.clone()) };
+        cmd.args(["--side", side, "--prefix", &self.sandbox.prefix, "--domain", &domain, "--mission-name", name]);
+        if host == ROVER {
+            cmd.args(["--listen", "tcp/0.0.0.0:7447"]);
+        } else {
+            cmd.args(["--connect", &hosts.rover_endpoint(host, 7447)]);
+        }
+        cmd.arg("--credentials").arg(self.credentials()).args(extra);
+        cmd.env("RUST_LOG", "info").stdin(Stdio::null()).stdout(Stdio::null());
+        let log = self.dir.join(format!("{name}-link-{side}-{}.log", self.next_log()));
+        cmd.stderr(std::fs::File::create(&log).expect("log file"));
+        let child = cmd.spawn().unwrap_or_else(|e| panic!("start dyfos-link: {e}"));
+        Robot { child: Some(child), log, events: self.dir.join("none.jsonl") }
+    }
+
+    fn next_log(&self) -> u32 {
+        self.logs.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
     }
 
     /// A recorder for mission `name`: open it before starting the rover.
@@ -158,6 +219,14 @@ impl Robot {
         let status = self.child.as_mut()?.try_wait().expect("try_wait")?;
         self.child = None;
         Some(status)
+    }
+
+    /// SIGTERM, and wait (at most [`crate::PATIENCE`]) for the exit.
+    pub fn terminate(&mut self) -> ExitStatus {
+        if let Some(c) = &self.child {
+            dyfos_client::shutdown::terminate(c.id());
+        }
+        self.wait_exit()
     }
 
     /// SIGKILL, and reap.

@@ -43,6 +43,10 @@ struct Cli {
     /// Longest wait at the start for a viewer, wall seconds.
     #[arg(allow_hyphen_values = true, long, default_value_t = 10.0)]
     viewer_timeout: f64,
+    /// A viewer without a heartbeat for this many wall seconds is gone (the rover
+    /// dead-reckons until it is back).
+    #[arg(allow_hyphen_values = true, long, default_value_t = 2.0)]
+    presence_timeout: f64,
     /// Drive without a viewer (no rendezvous, no measurements): the baseline.
     #[arg(long)]
     dead_reckoning: bool,
@@ -66,6 +70,7 @@ fn config(cli: &Cli) -> anyhow::Result<RoverConfig> {
         time_scale: (cli.time_scale > 0.0).then_some(cli.time_scale),
         measurement_timeout: seconds("measurement-timeout", cli.measurement_timeout)?,
         viewer_timeout: seconds("viewer-timeout", cli.viewer_timeout)?,
+        presence_timeout: seconds("presence-timeout", cli.presence_timeout)?,
         dead_reckoning: cli.dead_reckoning,
         events: cli.events.clone(),
         ..RoverConfig::new(topics, mission, cli.seed)

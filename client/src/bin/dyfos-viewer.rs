@@ -61,6 +61,12 @@ struct Cli {
     /// Exit after this many wall seconds without a word from the rover.
     #[arg(allow_hyphen_values = true, long, default_value_t = 120.0)]
     idle_timeout: f64,
+    /// A rover without a heartbeat for this many wall seconds is lost (the viewer waits for it).
+    #[arg(allow_hyphen_values = true, long, default_value_t = 2.0)]
+    presence_timeout: f64,
+    /// Exit after this many wall seconds without the rover's heartbeat (it went away).
+    #[arg(allow_hyphen_values = true, long, default_value_t = 20.0)]
+    rover_timeout: f64,
     /// Longest wait for the daemon at start, wall seconds.
     #[arg(allow_hyphen_values = true, long, default_value_t = 10.0)]
     connect_timeout: f64,
@@ -116,6 +122,8 @@ fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
         query_deadline: Some(seconds("deadline", cli.deadline)?).filter(|d| !d.is_zero()),
         observe_timeout: seconds("observe-timeout", cli.observe_timeout)?,
         idle_timeout: seconds("idle-timeout", cli.idle_timeout)?,
+        presence_timeout: seconds("presence-timeout", cli.presence_timeout)?,
+        rover_timeout: seconds("rover-timeout", cli.rover_timeout)?,
         events: cli.events.clone(),
         ..ViewerConfig::new(client, topics, mission, cli.algo, cli.seed)
     })

@@ -18,7 +18,8 @@ pub struct MissionTrace {
     pub truth: Vec<TrueState>,
     /// The rover's estimates, in arrival order.
     pub estimates: Vec<Estimate>,
-    /// The viewer's measurements (and non-measurements), in arrival order.
+    /// The viewer's measurements (and non-measurements), in arrival order, one per
+    /// step (repeats are dropped).
     pub measurements: Vec<Measurement>,
     /// Messages that failed to decode.
     pub malformed: usize,
@@ -127,6 +128,9 @@ impl Recorder {
         for m in self.measurement.drain() {
             n += 1;
             match Measurement::try_from(&m) {
+                // A measurement is re-sent until the rover acknowledges it: keep the
+                // first of each step.
+                Ok(x) if self.trace.measurements.iter().any(|m| m.step == x.step) => {}
                 Ok(x) => self.trace.measurements.push(x),
                 Err(_) => self.trace.malformed += 1,
             }

@@ -49,6 +49,7 @@
 //! ```
 
 pub mod log;
+pub mod presence;
 pub mod topics;
 
 use crate::sim::OdometryNoise;

@@ -4,16 +4,24 @@
 //! At each step i the rover
 //! 1. plans the leg to waypoint i+1 from its estimate ([`controller::plan_leg`]) and
 //!    propagates its belief through the plan: the rendezvous belief;
-//! 2. sends that belief to the viewer (`mission/<name>/rendezvous`);
+//! 2. sends that belief to the viewer (`mission/<name>/rendezvous`), and again
+//!    every [`RESEND_INTERVAL`] until the viewer acknowledges it;
 //! 3. drives: every tick the true pose moves by the command plus unseen slip
 //!    ([`crate::sim::TrueRover`]) while the EKF predicts with the command
 //!    ([`ekf::Ekf::predict`]);
 //! 4. waits, at most `measurement_timeout` of wall time, for the viewer's
-//!    measurement of step i+1; a measurement updates the EKF, anything else — not
-//!    observed, late, or a viewer that is gone — leaves it dead-reckoning, and the
-//!    log says which;
-//! 5. repeats until the goal, then tells the viewer it has finished (and waits,
-//!    at most `linger`, for any evaluation to acknowledge its last sample).
+//!    measurement of step i+1 (and acknowledges it); a measurement updates the
+//!    EKF, anything else — not observed, late, or a viewer that is gone — leaves
+//!    it dead-reckoning, and the log says which;
+//! 5. repeats until the goal, then tells the viewer it has finished (again until
+//!    acknowledged, or the viewer is gone) and waits, at most `linger`, for any
+//!    evaluation to acknowledge its last sample.
+//!
+//! The viewer is present while its heartbeats arrive ([`crate::mission::presence`]);
+//! one silent for `presence_timeout` is gone: the rover dead-reckons the steps it
+//! misses, keeps re-sending its rendezvous, and resumes with the viewer (or a
+//! restarted one) when it comes back. The event log records `viewer_lost` and
+//! `viewer_back`.
 //!
 //! The simulation half publishes the true pose on `sim/<name>/truth` (read only by
 //! the simulated camera and the evaluation) and the robot half its estimate on
@@ -35,14 +43,16 @@ pub mod ekf;
 
 use crate::mission::Mission;
 use crate::mission::log::EventLog;
+use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
 use crate::mission::topics::{Inbox, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
 use crate::sim::{SimClock, TrueRover, standard_normal, stream_seed, streams};
 use controller::{DriveConfig, plan_leg};
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::wire::mission::{
-    ESTIMATE_TOPIC, EVALUATION_TOPIC, Estimate, EstimateMsg, EvaluationAckMsg, MEASUREMENT_TOPIC, Measurement,
-    MeasurementMsg, Observation, Phase, RENDEZVOUS_TOPIC, RendezvousState, RendezvousStateMsg, TRUTH_TOPIC, TrueState,
-    TrueStateMsg,
+    AckKind, AckMsg, ESTIMATE_TOPIC, EVALUATION_TOPIC, Estimate, EstimateMsg, EvaluationAckMsg, MEASUREMENT_TOPIC,
+    Measurement, MeasurementMsg, Observation, Phase, RENDEZVOUS_TOPIC, RESEND_INTERVAL, ROVER_ACK_TOPIC,
+    ROVER_PRESENCE_TOPIC, RendezvousState, RendezvousStateMsg, TRUTH_TOPIC, TrueState, TrueStateMsg, VIEWER_ACK_TOPIC,
+    VIEWER_PRESENCE_TOPIC,
 };
 use ekf::Ekf;
 use rand::SeedableRng;
@@ -64,8 +74,10 @@ pub struct RoverConfig {
     pub time_scale: Option<f64>,
     /// Longest wait for a measurement at a waypoint, wall time.
     pub measurement_timeout: Duration,
-    /// Longest wait at the start for a viewer to listen, wall time.
+    /// Longest wait at the start for a viewer's heartbeat, wall time.
     pub viewer_timeout: Duration,
+    /// A viewer without a heartbeat for this long is gone, wall time.
+    pub presence_timeout: Duration,
     /// Drive without a viewer: no rendezvous, no measurements (the baseline).
     pub dead_reckoning: bool,
     /// Drive limits.
@@ -81,7 +93,7 @@ pub struct RoverConfig {
 
 impl RoverConfig {
     /// Defaults: paced 20× real time, 10 s measurement and viewer timeouts, a
-    /// sample every 5 ticks (4 Hz of simulated time).
+    /// viewer silent for 2 s is gone, a sample every 5 ticks (4 Hz of simulated time).
     pub fn new(topics: TopicsConfig, mission: Mission, seed: u64) -> Self {
         RoverConfig {
             topics,
@@ -90,6 +102,7 @@ impl RoverConfig {
             time_scale: Some(20.0),
             measurement_timeout: Duration::from_secs(10),
             viewer_timeout: Duration::from_secs(10),
+            presence_timeout: Duration::from_secs(2),
             dead_reckoning: false,
             drive: DriveConfig::default(),
             sample_every: 5,
@@ -111,12 +124,12 @@ pub enum RoverRunError {
     /// The event log could not be created.
     #[error("cannot create the event log: {0}")]
     Log(#[from] std::io::Error),
-    /// No viewer listened in time.
+    /// No viewer's heartbeat arrived in time.
     #[error(
-        "no viewer listens on `{topic}` after {waited:?}; start `dyfos-viewer` with the same --prefix and --mission-name, or pass --dead-reckoning"
+        "no viewer's heartbeat on `{topic}` after {waited:?}; start `dyfos-viewer` with the same --prefix and --mission-name (and, across hosts, `dyfos-link` on both), or pass --dead-reckoning"
     )]
     NoViewer {
-        /// The rendezvous topic.
+        /// The viewer's heartbeat topic.
         topic: String,
         /// How long the rover waited.
         waited: Duration,
@@ -140,16 +153,23 @@ pub struct RoverReport {
     pub missed: u32,
     /// The belief at the goal.
     pub final_belief: Belief,
+    /// Mission messages the rover sent to the viewer: rendezvous and finish, their
+    /// repeats, and acknowledgements (heartbeats and simulation samples not counted).
+    pub messages_sent: u32,
 }
 
 /// The rover's ports.
 struct Ports {
-    topics: Topics,
+    _topics: Topics,
     rendezvous: Outbox<RendezvousStateMsg>,
     measurement: Inbox<MeasurementMsg>,
     estimate: Outbox<EstimateMsg>,
     truth: Outbox<TrueStateMsg>,
     ack: Inbox<EvaluationAckMsg>,
+    viewer: Peer,
+    viewer_acks: Inbox<AckMsg>,
+    acks: Outbox<AckMsg>,
+    heartbeat: Heartbeat,
 }
 
 /// The running state.
@@ -162,6 +182,13 @@ struct Run<'a> {
     ekf: Ekf,
     sample: u64,
     sim_time: f64,
+    /// The rendezvous (or finish) not yet known to be acknowledged.
+    pending: Option<Reliable<RendezvousStateMsg>>,
+    /// Steps whose measurement has been used or given up on.
+    done: u32,
+    messages_sent: u32,
+    /// Whether presence changes go to the event log (not after the finish).
+    log_presence: bool,
 }
 
 /// Why a waypoint passed without a measurement.
@@ -182,21 +209,82 @@ impl Run<'_> {
         Ok(())
     }
 
-    /// Waits for the measurement of `step`; stale ones are logged and skipped.
+    /// Keeps the link with the viewer: takes in heartbeats and acknowledgements,
+    /// logs presence changes, re-sends what is not acknowledged, acknowledges late
+    /// duplicates of measurements already dealt with.
+    fn service(&mut self) -> Result<(), TopicSendError> {
+        if let Some(change) = self.ports.viewer.poll()
+            && self.log_presence
+        {
+            match change {
+                PresenceChange::Appeared { .. } => {}
+                PresenceChange::Lost => {
+                    tracing::warn!("the viewer's heartbeat stopped");
+                    self.log.record("viewer_lost", self.sim_time, json!({"step": self.done + 1}));
+                }
+                PresenceChange::Returned { instance, silent } => {
+                    tracing::info!("the viewer is back after {silent:?}");
+                    self.log.record(
+                        "viewer_back",
+                        self.sim_time,
+                        json!({"step": self.done + 1, "instance": instance, "silent_s": silent.as_secs_f64()}),
+                    );
+                }
+                PresenceChange::Restarted { instance } => {
+                    tracing::info!("the viewer restarted");
+                    self.log.record("viewer_back", self.sim_time, json!({"step": self.done + 1, "instance": instance}));
+                }
+            }
+        }
+        let acks = drain_acks(&self.ports.viewer_acks);
+        if let Some(p) = self.pending.as_mut() {
+            for a in &acks {
+                p.ack(a);
+            }
+            if p.service(&self.ports.rendezvous, self.ports.viewer.instance())? {
+                self.messages_sent += 1;
+                tracing::debug!(step = p.step(), "rendezvous sent again");
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends `state` reliably (replacing what was pending); returns how many readers got it.
+    fn send_reliably(&mut self, state: &RendezvousState) -> Result<usize, TopicSendError> {
+        let (step, kind) = match state {
+            RendezvousState::Rendezvous { step, .. } => (*step, AckKind::Rendezvous),
+            RendezvousState::Finished { step, .. } => (*step, AckKind::Finished),
+        };
+        let (pending, readers) = Reliable::send(&self.ports.rendezvous, RendezvousStateMsg::from(state), step, kind)?;
+        self.pending = Some(pending);
+        self.messages_sent += 1;
+        Ok(readers)
+    }
+
+    fn acknowledge(&mut self, step: u32) {
+        if acknowledge(&self.ports.acks, self.ports.heartbeat.instance(), step, AckKind::Measurement) {
+            self.messages_sent += 1;
+        }
+    }
+
+    /// Waits for the measurement of `step`. Each measurement received is
+    /// acknowledged; repeats of earlier steps are dropped.
     fn await_measurement(&mut self, step: u32, stop: &impl Fn() -> bool) -> Result<Measurement, Missed> {
         let start = Instant::now();
         let timeout = self.config.measurement_timeout;
         loop {
+            if self.service().is_err() {
+                tracing::warn!(step, "cannot re-send the rendezvous");
+            }
             let left = timeout.saturating_sub(start.elapsed());
-            // Take what arrives within 200 ms; only then ask whether the viewer lives,
-            // so that a measurement sent just before it died is still used.
-            let mut msg = self.ports.measurement.recv_timeout(left.min(Duration::from_millis(200)), stop);
+            // Take what arrives within a resend interval; only then ask whether the
+            // viewer lives, so that a measurement sent just before it died is used.
+            let mut msg = self.ports.measurement.recv_timeout(left.min(RESEND_INTERVAL), stop);
             if msg.is_none() {
                 if stop() || start.elapsed() >= timeout {
                     return Err(Missed::Timeout);
                 }
-                self.ports.topics.cleanup_dead_nodes();
-                if self.ports.measurement.writers() == 0 && self.ports.rendezvous.readers() == 0 {
+                if !self.ports.viewer.present() {
                     msg = self.ports.measurement.try_recv();
                     if msg.is_none() {
                         return Err(Missed::ViewerGone);
@@ -205,7 +293,16 @@ impl Run<'_> {
             }
             let Some(msg) = msg else { continue };
             match Measurement::try_from(&msg) {
-                Ok(m) if m.step == step => return Ok(m),
+                Ok(m) if m.step == step => {
+                    self.acknowledge(m.step);
+                    return Ok(m);
+                }
+                Ok(m) if m.step < step => {
+                    // A repeat of a step already dealt with: the viewer missed our
+                    // acknowledgement.
+                    self.acknowledge(m.step);
+                    tracing::debug!(step, for_step = m.step, "repeated measurement");
+                }
                 Ok(m) => self.log.record("measurement_stale", self.sim_time, json!({"step": step, "for_step": m.step})),
                 Err(e) => {
                     tracing::warn!("ignoring a malformed measurement: {e}");
@@ -237,12 +334,16 @@ fn true_start(mission: &Mission, seed: u64) -> [f64; 3] {
 pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<RoverReport, RoverRunError> {
     let topics = Topics::open(&config.topics)?;
     let ports = Ports {
+        viewer: Peer::open(&topics, VIEWER_PRESENCE_TOPIC, config.presence_timeout)?,
+        viewer_acks: topics.inbox(MISSION, VIEWER_ACK_TOPIC, 256)?,
+        acks: topics.outbox(MISSION, ROVER_ACK_TOPIC)?,
+        heartbeat: Heartbeat::start(&config.topics, ROVER_PRESENCE_TOPIC)?,
         rendezvous: topics.outbox(MISSION, RENDEZVOUS_TOPIC)?,
         measurement: topics.inbox(MISSION, MEASUREMENT_TOPIC, 64)?,
         estimate: topics.outbox(MISSION, ESTIMATE_TOPIC)?,
         truth: topics.outbox(SIM, TRUTH_TOPIC)?,
         ack: topics.inbox(MISSION, EVALUATION_TOPIC, 16)?,
-        topics,
+        _topics: topics,
     };
     let log = EventLog::create(config.events.as_deref(), "rover")?;
     let mission = &config.mission;
@@ -255,22 +356,30 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
         ekf: Ekf::new(&mission.initial_belief),
         sample: 0,
         sim_time: 0.0,
+        pending: None,
+        done: 0,
+        messages_sent: 0,
+        log_presence: true,
         ports,
     };
 
     if !config.dead_reckoning {
         let waited = Instant::now();
-        while run.ports.rendezvous.readers() == 0 {
+        loop {
+            run.ports.viewer.poll();
+            if run.ports.viewer.present() {
+                break;
+            }
             if stop() {
                 return Err(RoverRunError::Stopped { step: 0 });
             }
             if waited.elapsed() > config.viewer_timeout {
                 return Err(RoverRunError::NoViewer {
-                    topic: run.ports.rendezvous.name().to_string(),
+                    topic: topic_name(&config.topics, VIEWER_PRESENCE_TOPIC),
                     waited: config.viewer_timeout,
                 });
             }
-            std::thread::sleep(Duration::from_millis(10));
+            run.ports.viewer.wait(Duration::from_millis(10));
         }
     }
     run.log.record(
@@ -292,6 +401,7 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
     let dt = config.drive.dt;
     for (i, goal) in mission.waypoints.iter().enumerate() {
         let step = i as u32 + 1;
+        run.ports.heartbeat.set_step(step);
         let plan = plan_leg(run.ekf.mean(), *goal, &config.drive);
         let mut predicted = run.ekf.clone();
         for m in &plan {
@@ -300,14 +410,19 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
         let rendezvous = predicted.belief();
         if !config.dead_reckoning {
             let msg = RendezvousState::Rendezvous { step, sim_time: run.sim_time, belief: rendezvous };
-            let readers = run.ports.rendezvous.send(RendezvousStateMsg::from(&msg))?;
+            let readers = run.send_reliably(&msg)?;
             run.log.record(
                 "rendezvous_sent",
                 run.sim_time,
                 json!({"step": step, "mean": rendezvous.mean.as_slice(), "cov": rendezvous.cov.to_rows(), "readers": readers}),
             );
         }
+        let mut serviced = Instant::now();
         for (k, m) in plan.iter().enumerate() {
+            if !config.dead_reckoning && serviced.elapsed() >= RESEND_INTERVAL {
+                serviced = Instant::now();
+                run.service()?;
+            }
             run.truth.drive(m);
             run.ekf.predict(m, &mission.odometry);
             run.sim_time += dt;
@@ -354,6 +469,7 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
             Err(Missed::Timeout) => Some(format!("no measurement within {:?}", config.measurement_timeout)),
             Err(Missed::ViewerGone) => Some("viewer gone".to_string()),
         };
+        run.done = step;
         let updated = reason.is_none();
         if let Some(reason) = reason {
             missed += 1;
@@ -367,9 +483,18 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
     }
     let steps = mission.waypoints.len() as u32;
     if !config.dead_reckoning {
-        run.ports
-            .rendezvous
-            .send(RendezvousStateMsg::from(&RendezvousState::Finished { step: steps, sim_time: run.sim_time }))?;
+        run.send_reliably(&RendezvousState::Finished { step: steps, sim_time: run.sim_time })?;
+        // Until the viewer acknowledges, is gone, or the linger time is up.
+        let start = Instant::now();
+        run.log_presence = false;
+        while !run.pending.as_ref().is_some_and(|p| p.acked(run.ports.viewer.instance()))
+            && run.ports.viewer.present()
+            && start.elapsed() < config.linger
+            && !stop()
+        {
+            run.service()?;
+            run.ports.viewer_acks.wait(Duration::from_millis(20));
+        }
     }
     linger(&run, config.linger, stop);
     run.log.record(
@@ -377,8 +502,8 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
         run.sim_time,
         json!({"steps": steps, "measured": measured, "missed": missed, "belief": run.ekf.mean()}),
     );
-    tracing::info!(steps, measured, missed, "rover reached the goal");
-    Ok(RoverReport { steps, measured, missed, final_belief: run.ekf.belief() })
+    tracing::info!(steps, measured, missed, messages = run.messages_sent, "rover reached the goal");
+    Ok(RoverReport { steps, measured, missed, final_belief: run.ekf.belief(), messages_sent: run.messages_sent })
 }
 
 /// Waits up to `limit` for every evaluation listening to the estimates (each one
@@ -398,6 +523,11 @@ fn linger(run: &Run, limit: Duration, stop: &impl Fn() -> bool) {
             acks += 1;
         }
     }
+}
+
+/// The full name of a mission topic, for messages.
+fn topic_name(config: &TopicsConfig, topic: &str) -> String {
+    dyfos_shared::wire::mission::topic_name(&config.prefix, MISSION, &config.mission, topic)
 }
 
 /// Topic group of the robots' own topics.

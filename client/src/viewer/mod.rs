@@ -12,7 +12,15 @@
 //! 3. waits for the rover to stand at the waypoint and looks at its *true* pose
 //!    with the simulated camera ([`crate::sim::SimCamera`]): a measurement drawn
 //!    from N(true position, R_true), or why there is none;
-//! 4. sends the measurement, R and its own pose to the rover.
+//! 4. sends the measurement, R and its own pose to the rover, and again every
+//!    [`RESEND_INTERVAL`] until the rover acknowledges it (or moves on).
+//!
+//! Every rendezvous state is acknowledged as it arrives; a repeat of a step already
+//! taken is not served twice (idempotent by step). The rover is present while its
+//! heartbeats arrive ([`crate::mission::presence`]); the viewer waits for one that
+//! went silent (the log says `rover_lost`, then `rover_back`) and gives up only
+//! after `rover_timeout`. A restarted viewer takes the mission up at the rover's
+//! current rendezvous, which the rover re-sends until acknowledged.
 //!
 //! When the daemon has no answer (no feasible pose, unreachable) the viewer says
 //! so at once, and the rover dead-reckons that step.
@@ -32,6 +40,7 @@
 
 use crate::mission::Mission;
 use crate::mission::log::EventLog;
+use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
 use crate::mission::topics::{Inbox, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
 use crate::rover::{MISSION, SIM};
 use crate::sim::{CameraView, Flight, FlightLimits, SimCamera, SimClock, stream_seed, streams};
@@ -41,8 +50,9 @@ use dyfos_shared::posterior::Belief;
 use dyfos_shared::sdsmm::{Learned, NoiseModel, NoiseModelError};
 use dyfos_shared::wire::map::MapId;
 use dyfos_shared::wire::mission::{
-    MEASUREMENT_TOPIC, Measurement, MeasurementMsg, NoMeasurement, Observation, Phase, RENDEZVOUS_TOPIC,
-    RendezvousState, RendezvousStateMsg, TRUTH_TOPIC, TrueState, TrueStateMsg, ViewerPose,
+    AckKind, AckMsg, MEASUREMENT_TOPIC, Measurement, MeasurementMsg, NoMeasurement, Observation, Phase,
+    RENDEZVOUS_TOPIC, RESEND_INTERVAL, ROVER_ACK_TOPIC, ROVER_PRESENCE_TOPIC, RendezvousState, RendezvousStateMsg,
+    TRUTH_TOPIC, TrueState, TrueStateMsg, VIEWER_ACK_TOPIC, VIEWER_PRESENCE_TOPIC, ViewerPose,
 };
 use dyfos_shared::world::{MapDelta, Sun, World};
 use rand::SeedableRng;
@@ -77,8 +87,12 @@ pub struct ViewerConfig {
     pub query_deadline: Option<Duration>,
     /// Longest wait for the rover to reach the rendezvous once the viewer is there, wall time.
     pub observe_timeout: Duration,
-    /// Exit after this long without hearing from the rover, wall time.
+    /// Exit after this long without a rendezvous state from the rover, wall time.
     pub idle_timeout: Duration,
+    /// A rover without a heartbeat for this long is lost (the viewer still waits), wall time.
+    pub presence_timeout: Duration,
+    /// Exit (the rover went away) after this long without the rover's heartbeat, wall time.
+    pub rover_timeout: Duration,
     /// JSON-lines event log.
     pub events: Option<PathBuf>,
     /// Weights of the `learned` SDSMM, for missions whose `params.model` is
@@ -88,7 +102,8 @@ pub struct ViewerConfig {
 
 impl ViewerConfig {
     /// Defaults: map id 1, paced 20× real time, 30 s query timeout with a 20 s
-    /// deadline, 10 s to wait for the rover at a rendezvous, 120 s idle.
+    /// deadline, 10 s to wait for the rover at a rendezvous, 120 s idle, a rover
+    /// silent for 2 s lost and for 20 s gone.
     pub fn new(client: ClientConfig, topics: TopicsConfig, mission: Mission, algorithm: Algorithm, seed: u64) -> Self {
         ViewerConfig {
             client,
@@ -103,6 +118,8 @@ impl ViewerConfig {
             query_deadline: Some(Duration::from_secs(20)),
             observe_timeout: Duration::from_secs(10),
             idle_timeout: Duration::from_secs(120),
+            presence_timeout: Duration::from_secs(2),
+            rover_timeout: Duration::from_secs(20),
             events: None,
             learned: None,
         }
@@ -141,10 +158,12 @@ pub enum ViewerRunError {
         waited: Duration,
     },
     /// The rover that was being served went away before finishing.
-    #[error("the rover on `{topic}` went away before reaching its goal")]
+    #[error("the rover on `{topic}` went away before reaching its goal (no heartbeat for {waited:?})")]
     RoverGone {
         /// The rendezvous topic.
         topic: String,
+        /// How long the rover was silent.
+        waited: Duration,
     },
     /// SIGINT or SIGTERM arrived.
     #[error("stopped by a signal")]
@@ -158,6 +177,9 @@ pub struct ViewerReport {
     pub rendezvous: u32,
     /// Of those, rendezvous where the rover was measured.
     pub observed: u32,
+    /// Mission messages sent to the rover: measurements, their repeats, and
+    /// acknowledgements (heartbeats not counted).
+    pub messages_sent: u32,
 }
 
 struct Viewer<'a> {
@@ -172,6 +194,14 @@ struct Viewer<'a> {
     latest_truth: Option<TrueState>,
     log: EventLog,
     topics: Topics,
+    rover: Peer,
+    rover_acks: Inbox<AckMsg>,
+    acks: Outbox<AckMsg>,
+    heartbeat: Option<Heartbeat>,
+    measurement: Outbox<MeasurementMsg>,
+    /// The last measurement, until the rover acknowledges it.
+    pending: Option<Reliable<MeasurementMsg>>,
+    messages_sent: u32,
 }
 
 impl Viewer<'_> {
@@ -258,6 +288,55 @@ impl Viewer<'_> {
         ok
     }
 
+    /// Keeps the link with the rover: takes in heartbeats and acknowledgements,
+    /// logs presence changes, re-sends the measurement not yet acknowledged.
+    fn service(&mut self) -> Result<(), TopicSendError> {
+        if let Some(change) = self.rover.poll() {
+            let step = self.heartbeat_step();
+            match change {
+                PresenceChange::Appeared { .. } => {}
+                PresenceChange::Lost => {
+                    tracing::warn!("the rover's heartbeat stopped");
+                    self.log.record("rover_lost", self.clock.now(), json!({"step": step}));
+                }
+                PresenceChange::Returned { instance, silent } => {
+                    tracing::info!("the rover is back after {silent:?}");
+                    self.log.record(
+                        "rover_back",
+                        self.clock.now(),
+                        json!({"step": step, "instance": instance, "silent_s": silent.as_secs_f64()}),
+                    );
+                }
+                PresenceChange::Restarted { instance } => {
+                    tracing::info!("the rover restarted");
+                    self.log.record("rover_back", self.clock.now(), json!({"step": step, "instance": instance}));
+                }
+            }
+        }
+        let acks = drain_acks(&self.rover_acks);
+        if let Some(p) = self.pending.as_mut() {
+            for a in &acks {
+                p.ack(a);
+            }
+            if p.service(&self.measurement, self.rover.instance())? {
+                self.messages_sent += 1;
+                tracing::debug!(step = p.step(), "measurement sent again");
+            }
+        }
+        Ok(())
+    }
+
+    fn heartbeat_step(&self) -> u32 {
+        self.pending.as_ref().map_or(0, Reliable::step)
+    }
+
+    fn acknowledge(&mut self, step: u32, kind: AckKind) {
+        let instance = self.heartbeat.as_ref().map_or(0, Heartbeat::instance);
+        if acknowledge(&self.acks, instance, step, kind) {
+            self.messages_sent += 1;
+        }
+    }
+
     fn drain_truth(&mut self) {
         for msg in self.truth.drain() {
             match TrueState::try_from(&msg) {
@@ -282,15 +361,17 @@ impl Viewer<'_> {
             if start.elapsed() >= self.config.observe_timeout || stop() {
                 return Err(NoMeasurement::RoverLeft);
             }
-            // A rover that died on the way will not arrive: look once a second.
-            if checked.elapsed() >= Duration::from_secs(1) {
+            // A rover that died or lost the link on the way will not arrive.
+            if checked.elapsed() >= RESEND_INTERVAL {
                 checked = Instant::now();
-                self.topics.cleanup_dead_nodes();
-                if self.truth.writers() == 0 {
+                if let Err(e) = self.service() {
+                    tracing::warn!("cannot re-send the measurement: {e}");
+                }
+                if !self.rover.present() {
                     return Err(NoMeasurement::RoverLeft);
                 }
             }
-            self.truth.wait(self.config.observe_timeout.saturating_sub(start.elapsed()).min(Duration::from_secs(1)));
+            self.truth.wait(self.config.observe_timeout.saturating_sub(start.elapsed()).min(RESEND_INTERVAL));
         }
     }
 }
@@ -303,6 +384,9 @@ pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<Vie
     let topics = Topics::open(&config.topics)?;
     let truth = topics.inbox::<TrueStateMsg>(SIM, TRUTH_TOPIC, 64)?;
     let measurement: Outbox<MeasurementMsg> = topics.outbox(MISSION, MEASUREMENT_TOPIC)?;
+    let rover = Peer::open(&topics, ROVER_PRESENCE_TOPIC, config.presence_timeout)?;
+    let rover_acks = topics.inbox::<AckMsg>(MISSION, ROVER_ACK_TOPIC, 256)?;
+    let acks = topics.outbox::<AckMsg>(MISSION, VIEWER_ACK_TOPIC)?;
     let log = EventLog::create(config.events.as_deref(), "viewer")?;
     let mut v = Viewer {
         config,
@@ -316,37 +400,43 @@ pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<Vie
         latest_truth: None,
         log,
         topics,
+        rover,
+        rover_acks,
+        acks,
+        heartbeat: None,
+        measurement,
+        pending: None,
+        messages_sent: 0,
     };
     v.sync_map()?;
-    // Listening on the rendezvous topic is what tells the rover a viewer is ready,
-    // so it comes last.
+    // The heartbeat is what tells the rover a viewer is ready, so it comes last.
     let rendezvous = v.topics.inbox::<RendezvousStateMsg>(MISSION, RENDEZVOUS_TOPIC, 64)?;
+    v.heartbeat = Some(Heartbeat::start(&config.topics, VIEWER_PRESENCE_TOPIC)?);
     tracing::info!(algorithm = %config.algorithm, map = config.map_id, "viewer ready");
     v.log.record("ready", 0.0, json!({"algorithm": config.algorithm.name(), "map": config.map_id}));
 
-    let mut report = ViewerReport { rendezvous: 0, observed: 0 };
+    let mut report = ViewerReport { rendezvous: 0, observed: 0, messages_sent: 0 };
     let mut heard = Instant::now();
-    let mut checked = Instant::now();
+    let mut last_step = 0;
     loop {
         if stop() {
             return Err(ViewerRunError::Stopped);
         }
-        let Some(msg) = rendezvous.recv_timeout(Duration::from_millis(200), stop) else {
-            if heard.elapsed() > config.idle_timeout {
+        v.service()?;
+        let Some(msg) = rendezvous.recv_timeout(RESEND_INTERVAL, stop) else {
+            if heard.elapsed() > config.idle_timeout && !v.rover.present() {
                 return Err(ViewerRunError::Idle { topic: rendezvous.name().to_string(), waited: config.idle_timeout });
             }
-            // A rover that was here and is gone (crashed, killed) will not finish.
-            if report.rendezvous > 0 && checked.elapsed() > Duration::from_secs(1) {
-                checked = Instant::now();
-                v.topics.cleanup_dead_nodes();
-                if rendezvous.writers() == 0 {
-                    return Err(ViewerRunError::RoverGone { topic: rendezvous.name().to_string() });
-                }
+            // A rover that was here and stays silent (crashed, killed, out of
+            // reach for good) will not finish.
+            if let Some(silent) = v.rover.silent_for()
+                && silent > config.rover_timeout
+            {
+                return Err(ViewerRunError::RoverGone { topic: rendezvous.name().to_string(), waited: silent });
             }
             continue;
         };
         heard = Instant::now();
-        v.clock.catch_up();
         let state = match RendezvousState::try_from(&msg) {
             Ok(s) => s,
             Err(e) => {
@@ -356,12 +446,29 @@ pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<Vie
         };
         let (step, belief) = match state {
             RendezvousState::Finished { step, .. } => {
+                v.acknowledge(step, AckKind::Finished);
+                v.clock.catch_up();
                 v.log.record("finished", v.clock.now(), json!({"step": step}));
-                tracing::info!(step, "rover finished; viewer done");
+                report.messages_sent = v.messages_sent;
+                tracing::info!(step, messages = v.messages_sent, "rover finished; viewer done");
                 return Ok(report);
             }
             RendezvousState::Rendezvous { step, belief, .. } => (step, belief),
         };
+        v.acknowledge(step, AckKind::Rendezvous);
+        if step <= last_step {
+            // A repeat (our acknowledgement was late or lost): served already; the
+            // measurement, if not yet acknowledged, is being re-sent.
+            tracing::debug!(step, "repeated rendezvous");
+            continue;
+        }
+        last_step = step;
+        // The rover moved on: the last measurement is no longer awaited.
+        v.pending = None;
+        if let Some(h) = &v.heartbeat {
+            h.set_step(step);
+        }
+        v.clock.catch_up();
         report.rendezvous += 1;
         v.log.record("rendezvous_received", v.clock.now(), json!({"step": step, "mean": belief.mean.as_slice()}));
 
@@ -424,7 +531,9 @@ pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<Vie
             }
             Observation::NotObserved(why) => (why.name(), None),
         };
-        measurement.send(MeasurementMsg::from(&m))?;
+        let (pending, _) = Reliable::send(&v.measurement, MeasurementMsg::from(&m), step, AckKind::Measurement)?;
+        v.pending = Some(pending);
+        v.messages_sent += 1;
         v.log.record("measurement_sent", v.clock.now(), json!({"step": step, "status": status, "R": r}));
         tracing::info!(step, status, "measurement sent");
     }

@@ -10,6 +10,18 @@
 //! | `mission/<name>/estimate` | rover → evaluation | [`EstimateMsg`]: the rover's EKF belief over time |
 //! | `sim/<name>/truth` | simulator → simulated camera and evaluation only | [`TrueStateMsg`]: the rover's true pose |
 //! | `mission/<name>/evaluation` | evaluation → rover | [`EvaluationAckMsg`]: "I have every sample up to this one" |
+//! | `mission/<name>/rover_presence` | rover → viewer | [`PresenceMsg`]: the rover's heartbeat |
+//! | `mission/<name>/viewer_presence` | viewer → rover | [`PresenceMsg`]: the viewer's heartbeat |
+//! | `mission/<name>/rover_ack` | rover → viewer | [`AckMsg`]: "I have your measurement of step k" |
+//! | `mission/<name>/viewer_ack` | viewer → rover | [`AckMsg`]: "I have your rendezvous (or finish) of step k" |
+//!
+//! Presence is a heartbeat, not a count of attached ports (a cross-host link's
+//! ports count too): each process publishes a [`PresenceMsg`] every
+//! [`HEARTBEAT_PERIOD`], and a peer silent for longer than its presence timeout is
+//! gone. Whatever one side waits for (a rendezvous, the finish, a measurement) is
+//! re-sent every [`RESEND_INTERVAL`] until the other side acknowledges it by
+//! (step, kind) with an [`AckMsg`]; receivers are idempotent by step, so a
+//! duplicate is acknowledged again and otherwise ignored.
 //!
 //! A publisher's samples reach a subscriber only if the subscriber connected while
 //! the publisher was alive; a rover that finishes in milliseconds could exit before
@@ -54,9 +66,102 @@ pub const TRUTH_TOPIC: &str = "truth";
 /// Topic of [`EvaluationAckMsg`] (group `mission`).
 pub const EVALUATION_TOPIC: &str = "evaluation";
 
+/// Topic of the rover's [`PresenceMsg`] heartbeats (group `mission`).
+pub const ROVER_PRESENCE_TOPIC: &str = "rover_presence";
+/// Topic of the viewer's [`PresenceMsg`] heartbeats (group `mission`).
+pub const VIEWER_PRESENCE_TOPIC: &str = "viewer_presence";
+/// Topic of the rover's [`AckMsg`]s (of measurements; group `mission`).
+pub const ROVER_ACK_TOPIC: &str = "rover_ack";
+/// Topic of the viewer's [`AckMsg`]s (of rendezvous states; group `mission`).
+pub const VIEWER_ACK_TOPIC: &str = "viewer_ack";
+
+/// How often each mission process publishes its heartbeat.
+pub const HEARTBEAT_PERIOD: std::time::Duration = std::time::Duration::from_millis(100);
+/// How often an unacknowledged rendezvous, finish or measurement is sent again.
+pub const RESEND_INTERVAL: std::time::Duration = std::time::Duration::from_millis(250);
+
+/// A heartbeat: process `instance` (random per process start) is alive and at
+/// waypoint `step`. Any value is acceptable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[type_name("dyfos::mission::Presence")]
+#[repr(C)]
+pub struct PresenceMsg {
+    /// Random number drawn at the process's start: a new one means a restarted peer.
+    pub instance: u64,
+    /// The waypoint the process is at or working on (0 before the first).
+    pub step: u32,
+    /// Explicit padding (always 0).
+    pub reserved: u32,
+}
+
+/// What an [`AckMsg`] acknowledges.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum AckKind {
+    /// The rendezvous state of `step` (viewer → rover).
+    Rendezvous,
+    /// The rover's "finished" (viewer → rover).
+    Finished,
+    /// The measurement of `step` (rover → viewer).
+    Measurement,
+}
+
+impl AckKind {
+    /// The wire code.
+    pub fn code(self) -> u32 {
+        match self {
+            AckKind::Rendezvous => 0,
+            AckKind::Finished => 1,
+            AckKind::Measurement => 2,
+        }
+    }
+}
+
+/// Wire form of [`Ack`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
+#[type_name("dyfos::mission::Ack")]
+#[repr(C)]
+pub struct AckMsg {
+    /// The acknowledging process's [`PresenceMsg::instance`].
+    pub instance: u64,
+    /// The step acknowledged.
+    pub step: u32,
+    /// [`AckKind`] code.
+    pub kind: u32,
+}
+
+/// "Process `instance` holds your message of `kind` for `step`."
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Ack {
+    /// The acknowledging process.
+    pub instance: u64,
+    /// The step.
+    pub step: u32,
+    /// What is acknowledged.
+    pub kind: AckKind,
+}
+
+impl From<&Ack> for AckMsg {
+    fn from(a: &Ack) -> Self {
+        AckMsg { instance: a.instance, step: a.step, kind: a.kind.code() }
+    }
+}
+
+impl TryFrom<&AckMsg> for Ack {
+    type Error = MissionDecodeError;
+    fn try_from(m: &AckMsg) -> Result<Self, Self::Error> {
+        let kind = match m.kind {
+            0 => AckKind::Rendezvous,
+            1 => AckKind::Finished,
+            2 => AckKind::Measurement,
+            value => return Err(MissionDecodeError::UnknownCode { field: "kind", value }),
+        };
+        Ok(Ack { instance: m.instance, step: m.step, kind })
+    }
+}
+
 /// The evaluation's acknowledgement: it holds every truth and estimate sample up
 /// to and including `sample`. Any value is acceptable, so there is nothing to decode.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
 #[type_name("dyfos::mission::EvaluationAck")]
 #[repr(C)]
 pub struct EvaluationAckMsg {
@@ -136,7 +241,7 @@ impl TryFrom<u32> for Phase {
 // Rendezvous state: rover → viewer.
 
 /// Wire form of [`RendezvousState`].
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
 #[type_name("dyfos::mission::RendezvousState")]
 #[repr(C)]
 pub struct RendezvousStateMsg {
@@ -253,7 +358,7 @@ impl NoMeasurement {
 }
 
 /// Wire form of [`Measurement`].
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
 #[type_name("dyfos::mission::Measurement")]
 #[repr(C)]
 pub struct MeasurementMsg {
@@ -379,7 +484,7 @@ impl TryFrom<&MeasurementMsg> for Measurement {
 // Estimate: rover → evaluation.
 
 /// Wire form of [`Estimate`].
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
 #[type_name("dyfos::mission::Estimate")]
 #[repr(C)]
 pub struct EstimateMsg {
@@ -457,7 +562,7 @@ impl TryFrom<&EstimateMsg> for Estimate {
 // Truth: simulator → camera and evaluation.
 
 /// Wire form of [`TrueState`].
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend, serde::Serialize, serde::Deserialize)]
 #[type_name("dyfos::sim::TrueState")]
 #[repr(C)]
 pub struct TrueStateMsg {

@@ -7,8 +7,14 @@
 //! rover's estimate, prints the APE table of paper Table I and writes one SVG per
 //! algorithm in the style of paper Fig. 5. Every child is stopped on exit, on error
 //! and on Ctrl-C.
+//!
+//! With `--hosts 2` each algorithm's rover runs on a second "host" (a network
+//! namespace with its own iceoryx2 domain, see [`crate::hosts`]) and the mission
+//! crosses a `dyfos-link` pair over Zenoh; the table is the same. The
+//! dead-reckoning baseline has no viewer, so it stays on the demo's host.
 
 use crate::Failure;
+use crate::hosts::{ROVER_ENDPOINT, TwoHosts};
 use anyhow::{Context, anyhow, bail};
 use dyfos_client::eval::{ApeStats, MissionTrace, Recorder, mean_std, render_svg};
 use dyfos_client::mission::Mission;
@@ -51,6 +57,10 @@ pub struct DemoArgs {
     /// (given to dyfosd and to each viewer).
     #[arg(long)]
     pub model: Option<PathBuf>,
+    /// 2: run each rover on a second host (a network namespace; needs root) and
+    /// carry the mission over `dyfos-link` (Zenoh), as on two robots.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub hosts: u8,
 }
 
 /// One configuration of the table: an algorithm or the baseline.
@@ -74,10 +84,11 @@ struct Binaries {
     dyfosd: PathBuf,
     rover: PathBuf,
     viewer: PathBuf,
+    link: Option<PathBuf>,
 }
 
 impl Binaries {
-    fn locate() -> anyhow::Result<Self> {
+    fn locate(link: bool) -> anyhow::Result<Self> {
         let exe = std::env::current_exe().context("cannot find this executable's path")?;
         let dir = exe.parent().ok_or_else(|| anyhow!("{} has no directory", exe.display()))?;
         let find = |name: &str| {
@@ -91,7 +102,12 @@ impl Binaries {
                 ))
             }
         };
-        Ok(Binaries { dyfosd: find("dyfosd")?, rover: find("dyfos-rover")?, viewer: find("dyfos-viewer")? })
+        Ok(Binaries {
+            dyfosd: find("dyfosd")?,
+            rover: find("dyfos-rover")?,
+            viewer: find("dyfos-viewer")?,
+            link: if link { Some(find("dyfos-link")?) } else { None },
+        })
     }
 }
 
@@ -172,6 +188,7 @@ struct Demo<'a> {
     model_arg: Option<PathBuf>,
     waypoints: usize,
     interactive: bool,
+    hosts: Option<TwoHosts>,
 }
 
 fn interrupted() -> anyhow::Error {
@@ -192,10 +209,35 @@ impl Demo<'_> {
                 cmd.arg("--mission").arg(m);
             }
         };
+        // Across two hosts: the links first, the viewer in the viewer's namespace,
+        // the rover in the rover's, with its own domain.
+        let two = self.hosts.as_ref().filter(|_| arm != Arm::DeadReckoning);
+        let mut _links = Vec::new();
+        if let (Some(h), Some(link)) = (two, &self.bins.link) {
+            for (ns, side, domain, endpoint) in [
+                (&h.rover, "rover", Some(h.rover_domain.as_str()), ["--listen", "tcp/0.0.0.0:7447"]),
+                (&h.viewer, "viewer", None, ["--connect", ROVER_ENDPOINT]),
+            ] {
+                let mut cmd = h.command(ns, link);
+                cmd.args(["--side", side, "--prefix", &self.prefix, "--mission-name", &name])
+                    .args(endpoint)
+                    .arg("--credentials")
+                    .arg(&h.credentials)
+                    .env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()));
+                if let Some(d) = domain {
+                    cmd.args(["--domain", d]);
+                }
+                let log = self.logs.join(format!("{name}-link-{side}.log"));
+                _links.push(Proc::spawn("dyfos-link", &mut cmd, &log)?);
+            }
+        }
         let mut viewer = match arm {
             Arm::DeadReckoning => None,
             Arm::Viewer(algo) => {
-                let mut cmd = Command::new(&self.bins.viewer);
+                let mut cmd = match two {
+                    Some(h) => h.command(&h.viewer, &self.bins.viewer),
+                    None => Command::new(&self.bins.viewer),
+                };
                 common(&mut cmd);
                 if let Some(m) = &self.model_arg {
                     cmd.arg("--model").arg(m);
@@ -206,7 +248,14 @@ impl Demo<'_> {
                 Some(Proc::spawn("dyfos-viewer", &mut cmd, &self.logs.join(format!("{name}-viewer.log")))?)
             }
         };
-        let mut cmd = Command::new(&self.bins.rover);
+        let mut cmd = match two {
+            Some(h) => {
+                let mut cmd = h.command(&h.rover, &self.bins.rover);
+                cmd.args(["--domain", &h.rover_domain]);
+                cmd
+            }
+            None => Command::new(&self.bins.rover),
+        };
         common(&mut cmd);
         cmd.args(["--viewer-timeout", "30", "--measurement-timeout", "30"])
             .arg("--events")
@@ -384,7 +433,7 @@ fn run(args: &DemoArgs) -> Result<(), Failure> {
             "the mission uses the learned SDSMM (`\"model\": \"learned\"`); pass its weights with --model FILE (e.g. tests/data/learned/model.bin)"
         )));
     }
-    let bins = Binaries::locate()?;
+    let bins = Binaries::locate(args.hosts == 2)?;
     shutdown::install();
     let logs = args.out.join("logs");
     std::fs::create_dir_all(&logs).with_context(|| format!("cannot create {}", logs.display()))?;
@@ -409,6 +458,10 @@ fn run(args: &DemoArgs) -> Result<(), Failure> {
     );
     let started = Instant::now();
     let model_arg = args.model.as_ref().map(|p| std::path::absolute(p).unwrap_or_else(|_| p.clone()));
+    let hosts = if args.hosts == 2 { Some(TwoHosts::create(&logs)?) } else { None };
+    if hosts.is_some() {
+        eprintln!("  two hosts: each rover in its own network namespace, the mission over dyfos-link (Zenoh)");
+    }
     let mut daemon = start_daemon(&bins, &prefix, &state, model_arg.as_deref(), &logs.join("dyfosd.log"))?;
     let demo = Demo {
         args,
@@ -419,6 +472,7 @@ fn run(args: &DemoArgs) -> Result<(), Failure> {
         model_arg: model_arg.clone(),
         waypoints: mission.waypoints.len(),
         interactive: std::io::stderr().is_terminal(),
+        hosts,
     };
     let mut results = Vec::new();
     for seed in args.seed..args.seed.saturating_add(args.seeds) {

@@ -5,6 +5,7 @@
 //! feasible pose, 1 anything else.
 
 mod demo;
+mod hosts;
 mod offline;
 mod online;
 mod train;

@@ -1,0 +1,613 @@
+//! # dyfos-link
+//!
+//! The cross-host link of a mission: the rover's host and the viewer's host each
+//! run one [`Link`], which carries the mission's topics between the host's own
+//! iceoryx2 shared memory and the other host over [Zenoh](https://zenoh.io) (TCP).
+//! The rover and the viewer do not change: their protocol
+//! ([`dyfos_client::mission::presence`]) already tolerates a link that drops, delays
+//! or restarts, and the viewer's queries to `dyfosd` stay on its own host.
+//!
+//! ```no_run
+//! use dyfos_client::mission::topics::TopicsConfig;
+//! use dyfos_link::{Link, LinkConfig, Side};
+//!
+//! let topics = TopicsConfig { prefix: "dyfos/".into(), domain: None, mission: "field-1".into() };
+//! let mut config = LinkConfig::new(topics, Side::Rover);
+//! config.listen.push("tcp/0.0.0.0:7447".into());
+//! config.credentials = Some(std::path::PathBuf::from("/etc/dyfos/field-1.credentials"));
+//! let link = Link::start(&config)?;
+//! // ... until the mission is over:
+//! let stats = link.stop();
+//! println!("{} messages out, {} in, {} dropped", stats.sent, stats.received, stats.dropped);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! What crosses, and nothing else (key expressions `dyfos/<mission>/<group>/<topic>`):
+//!
+//! | from the rover's host | from the viewer's host |
+//! |---|---|
+//! | `rendezvous`, `estimate`, `rover_presence`, `rover_ack`, `sim/truth` | `measurement`, `viewer_presence`, `viewer_ack`, `evaluation` |
+//!
+//! Each message travels as a versioned frame ([`LINK_VERSION`], the mission's name,
+//! the payload; bincode) and is validated on arrival like any wire input: a frame of
+//! another version or mission, or a payload that does not decode into its validated
+//! type (NaN, out of range, unknown codes), is dropped and logged through the
+//! rate-limited log. Zenoh publishes reliably and blocks rather than drop under a
+//! burst, and reconnects by itself after the link comes back.
+//!
+//! Security is Zenoh's own: with [`LinkConfig::credentials`] (a file of one
+//! `user:password` line, the same on both hosts) each side presents the mission's
+//! user and password and accepts only peers that present them (Zenoh user/password
+//! authentication: a challenge–response, the password never crosses the link), and
+//! access control allows only the mission's key expressions (from the mission's
+//! user, on the listening side); anything else is denied. The traffic itself is
+//! not encrypted: on an untrusted radio, run the link over a VPN (or add Zenoh's
+//! TLS transport, `transport_tls`, not built here).
+#![warn(missing_docs)]
+
+use dyfos_client::mission::topics::{MAX_BUFFER, TopicOpenError, Topics, TopicsConfig};
+use dyfos_shared::wire::mission::{
+    Ack, AckMsg, ESTIMATE_TOPIC, EVALUATION_TOPIC, Estimate, EstimateMsg, EvaluationAckMsg, MEASUREMENT_TOPIC,
+    Measurement, MeasurementMsg, PresenceMsg, RENDEZVOUS_TOPIC, ROVER_ACK_TOPIC, ROVER_PRESENCE_TOPIC, RendezvousState,
+    RendezvousStateMsg, TRUTH_TOPIC, TrueState, TrueStateMsg, VIEWER_ACK_TOPIC, VIEWER_PRESENCE_TOPIC,
+};
+use iceoryx2::prelude::ZeroCopySend;
+use serde::{Deserialize, Serialize, de::DeserializeOwned};
+use std::fmt::Debug;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+use zenoh::Wait;
+
+/// Version of the link's frames; a frame of another version is dropped.
+pub const LINK_VERSION: u16 = 1;
+
+/// Largest frame accepted, bytes (the largest message is about 200).
+pub const MAX_FRAME: usize = 4096;
+
+/// Longest sleep of a forwarding thread, so that a stop is noticed.
+const NAP: Duration = Duration::from_millis(100);
+
+/// Which host a link runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    /// The rover's host: sends the rover's topics, receives the viewer's.
+    Rover,
+    /// The viewer's host (with `dyfosd`): sends the viewer's topics, receives the rover's.
+    Viewer,
+}
+
+impl Side {
+    /// `rover` or `viewer`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Side::Rover => "rover",
+            Side::Viewer => "viewer",
+        }
+    }
+}
+
+/// How a link runs.
+#[derive(Debug, Clone)]
+pub struct LinkConfig {
+    /// This host's iceoryx2 prefix and domain, and the mission's name.
+    pub topics: TopicsConfig,
+    /// Which host this is.
+    pub side: Side,
+    /// Zenoh endpoints to listen on, e.g. `tcp/0.0.0.0:7447`.
+    pub listen: Vec<String>,
+    /// Zenoh endpoints of the other host to connect to, e.g. `tcp/10.0.0.1:7447`
+    /// (retried until it answers, and again after a loss).
+    pub connect: Vec<String>,
+    /// File with one `user:password` line: the mission's credentials. `None`
+    /// runs without authentication or access control (a trusted network only).
+    pub credentials: Option<PathBuf>,
+    /// Zenoh lease: a peer silent this long is disconnected (and reconnected when it answers).
+    pub lease: Duration,
+}
+
+impl LinkConfig {
+    /// A link for `side` with no endpoints yet, no credentials, a 3 s lease.
+    pub fn new(topics: TopicsConfig, side: Side) -> Self {
+        LinkConfig {
+            topics,
+            side,
+            listen: Vec::new(),
+            connect: Vec::new(),
+            credentials: None,
+            lease: Duration::from_secs(3),
+        }
+    }
+}
+
+/// Why a link could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkStartError {
+    /// The mission's name cannot be part of a key expression.
+    #[error("mission name `{0}` cannot cross the link: use letters, digits, `-`, `_` and `.` only")]
+    MissionName(String),
+    /// Neither an endpoint to listen on nor one to connect to.
+    #[error("give at least one --listen or --connect endpoint (e.g. --listen tcp/0.0.0.0:7447)")]
+    NoEndpoint,
+    /// The credentials file is unusable.
+    #[error("credentials file {path}: {message}")]
+    Credentials {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// Zenoh refused the configuration or could not open the session.
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    /// A local topic could not be opened.
+    #[error(transparent)]
+    Open(#[from] TopicOpenError),
+}
+
+/// What a link did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LinkStats {
+    /// Messages sent to the other host.
+    pub sent: u64,
+    /// Valid messages received from the other host and handed to this host's topics.
+    pub received: u64,
+    /// Frames received and dropped (another version or mission, malformed, invalid).
+    pub dropped: u64,
+}
+
+#[derive(Debug, Default)]
+struct Counters {
+    sent: AtomicU64,
+    received: AtomicU64,
+    dropped: AtomicU64,
+}
+
+/// A frame on the link: version, mission and one message.
+#[derive(Debug, Serialize, Deserialize)]
+struct Frame<T> {
+    version: u16,
+    mission: String,
+    msg: T,
+}
+
+fn bincode_config() -> impl bincode::config::Config {
+    bincode::config::standard().with_fixed_int_encoding().with_little_endian().with_limit::<MAX_FRAME>()
+}
+
+/// Encodes `msg` of `mission` as a frame.
+pub fn encode<T: Serialize>(mission: &str, msg: &T) -> Vec<u8> {
+    let frame = Frame { version: LINK_VERSION, mission: mission.to_string(), msg };
+    bincode::serde::encode_to_vec(&frame, bincode_config()).expect("a frame of plain numbers encodes")
+}
+
+/// A frame that was dropped, and why.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FrameError {
+    /// Not a frame.
+    #[error("malformed frame: {0}")]
+    Malformed(String),
+    /// A frame of another link version.
+    #[error("frame version {0}, this link speaks version {LINK_VERSION}")]
+    Version(u16),
+    /// A frame of another mission.
+    #[error("frame of unknown mission `{0}`")]
+    Mission(String),
+    /// The message does not validate.
+    #[error("invalid message: {0}")]
+    Invalid(String),
+}
+
+/// A message type that may cross the link: checked on arrival as on any wire.
+pub trait LinkMessage: Debug + Copy + ZeroCopySend + Serialize + DeserializeOwned + Send + 'static {
+    /// `Err(why)` when the message must be dropped.
+    fn validate(&self) -> Result<(), String>;
+}
+
+impl LinkMessage for RendezvousStateMsg {
+    fn validate(&self) -> Result<(), String> {
+        RendezvousState::try_from(self).map(|_| ()).map_err(|e| e.to_string())
+    }
+}
+impl LinkMessage for MeasurementMsg {
+    fn validate(&self) -> Result<(), String> {
+        Measurement::try_from(self).map(|_| ()).map_err(|e| e.to_string())
+    }
+}
+impl LinkMessage for EstimateMsg {
+    fn validate(&self) -> Result<(), String> {
+        Estimate::try_from(self).map(|_| ()).map_err(|e| e.to_string())
+    }
+}
+impl LinkMessage for TrueStateMsg {
+    fn validate(&self) -> Result<(), String> {
+        TrueState::try_from(self).map(|_| ()).map_err(|e| e.to_string())
+    }
+}
+impl LinkMessage for AckMsg {
+    fn validate(&self) -> Result<(), String> {
+        Ack::try_from(self).map(|_| ()).map_err(|e| e.to_string())
+    }
+}
+impl LinkMessage for PresenceMsg {
+    fn validate(&self) -> Result<(), String> {
+        if self.reserved == 0 { Ok(()) } else { Err(format!("reserved = {} must be 0", self.reserved)) }
+    }
+}
+impl LinkMessage for EvaluationAckMsg {
+    fn validate(&self) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// Decodes and validates a frame of `mission`.
+pub fn decode<T: LinkMessage>(mission: &str, bytes: &[u8]) -> Result<T, FrameError> {
+    let (frame, used): (Frame<T>, usize) = bincode::serde::decode_from_slice(bytes, bincode_config()).map_err(|e| {
+        // Tell an old or new link from garbage: the version comes first.
+        match bytes.get(..2) {
+            Some(v) if u16::from_le_bytes([v[0], v[1]]) != LINK_VERSION => {
+                FrameError::Version(u16::from_le_bytes([v[0], v[1]]))
+            }
+            _ => FrameError::Malformed(e.to_string()),
+        }
+    })?;
+    if used != bytes.len() {
+        return Err(FrameError::Malformed(format!("{} bytes after the frame", bytes.len() - used)));
+    }
+    if frame.version != LINK_VERSION {
+        return Err(FrameError::Version(frame.version));
+    }
+    if frame.mission != mission {
+        return Err(FrameError::Mission(frame.mission.chars().take(64).collect()));
+    }
+    frame.msg.validate().map_err(FrameError::Invalid)?;
+    Ok(frame.msg)
+}
+
+/// The Zenoh key expression of a mission topic.
+pub fn key_expr(mission: &str, group: &str, topic: &str) -> String {
+    format!("dyfos/{mission}/{group}/{topic}")
+}
+
+fn valid_mission(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 64
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
+/// Reads `user:password` from the credentials file.
+fn read_credentials(path: &std::path::Path) -> Result<(String, String), LinkStartError> {
+    let err = |message: String| LinkStartError::Credentials { path: path.display().to_string(), message };
+    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let line = text.lines().map(str::trim).find(|l| !l.is_empty()).ok_or_else(|| err("is empty".into()))?;
+    let (user, password) = line.split_once(':').ok_or_else(|| err("must hold one line `user:password`".into()))?;
+    if user.is_empty() || password.len() < 8 || user.contains(['"', '\\']) || password.contains(['"', '\\']) {
+        return Err(err("needs a user and a password of at least 8 characters, without quotes or backslashes".into()));
+    }
+    Ok((user.to_string(), password.to_string()))
+}
+
+/// The Zenoh configuration of a link: a peer on TCP only, no scouting (the
+/// endpoints are given), and with credentials, user/password authentication and
+/// access control limited to the mission's key expressions.
+pub fn zenoh_config(config: &LinkConfig) -> Result<zenoh::Config, LinkStartError> {
+    let mission = &config.topics.mission;
+    if !valid_mission(mission) {
+        return Err(LinkStartError::MissionName(mission.clone()));
+    }
+    if config.listen.is_empty() && config.connect.is_empty() {
+        return Err(LinkStartError::NoEndpoint);
+    }
+    let zerr = |e: zenoh::Error| LinkStartError::Zenoh(e.to_string());
+    let json = |v: &[String]| serde_json_list(v);
+    let mut c = zenoh::Config::default();
+    let lease = config.lease.as_millis().clamp(500, 600_000);
+    for (key, value) in [
+        ("mode", "\"peer\"".to_string()),
+        ("scouting/multicast/enabled", "false".into()),
+        ("scouting/gossip/enabled", "false".into()),
+        ("listen/endpoints", json(&config.listen)),
+        ("connect/endpoints", json(&config.connect)),
+        ("connect/timeout_ms", "-1".into()),
+        ("connect/exit_on_failure", "false".into()),
+        ("connect/retry", "{period_init_ms: 250, period_max_ms: 1000, period_increase_factor: 2}".into()),
+        ("transport/link/tx/lease", lease.to_string()),
+    ] {
+        c.insert_json5(key, &value).map_err(zerr)?;
+    }
+    if let Some(path) = &config.credentials {
+        let (user, password) = read_credentials(path)?;
+        let dictionary = std::path::absolute(path).unwrap_or_else(|_| path.clone());
+        let usrpwd = format!(
+            "{{user: \"{user}\", password: \"{password}\", dictionary_file: {}}}",
+            serde_json_list(&[dictionary.display().to_string()]).trim_start_matches('[').trim_end_matches(']')
+        );
+        c.insert_json5("transport/auth/usrpwd", &usrpwd).map_err(zerr)?;
+        let keys = serde_json_list(&[format!("dyfos/{mission}/**")]);
+        // User/password authenticates the connecting side to the listening side
+        // only: a listener allows the mission's user; a side that connects (to the
+        // endpoint it was given) cannot learn the listener's user, so its rule
+        // applies to any peer, still for the mission's keys only.
+        let subject = if config.connect.is_empty() {
+            format!(r#"{{ id: "crew", usernames: ["{user}"] }}"#)
+        } else {
+            r#"{ id: "crew" }"#.to_string()
+        };
+        let acl = format!(
+            r#"{{
+                enabled: true,
+                default_permission: "deny",
+                rules: [{{ id: "mission", messages: ["put", "delete", "declare_subscriber"],
+                          flows: ["egress", "ingress"], permission: "allow", key_exprs: {keys} }}],
+                subjects: [{subject}],
+                policies: [{{ rules: ["mission"], subjects: ["crew"] }}],
+            }}"#
+        );
+        c.insert_json5("access_control", &acl).map_err(zerr)?;
+    }
+    Ok(c)
+}
+
+/// A JSON list of strings.
+fn serde_json_list(v: &[String]) -> String {
+    let items: Vec<String> =
+        v.iter().map(|s| format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))).collect();
+    format!("[{}]", items.join(", "))
+}
+
+/// A running link; [`Link::stop`] (or dropping it) ends it.
+pub struct Link {
+    session: zenoh::Session,
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+    counters: Arc<Counters>,
+}
+
+impl Debug for Link {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Link").field("zid", &self.session.zid()).field("stats", &self.stats()).finish()
+    }
+}
+
+const MISSION: &str = "mission";
+const SIM: &str = "sim";
+
+impl Link {
+    /// Opens the Zenoh session and starts forwarding: one thread per topic and
+    /// direction. Returns once every port is open (the other host may come later).
+    pub fn start(config: &LinkConfig) -> Result<Self, LinkStartError> {
+        let zconfig = zenoh_config(config)?;
+        let session = zenoh::open(zconfig).wait().map_err(|e| LinkStartError::Zenoh(e.to_string()))?;
+        let mut link =
+            Link { session, stop: Arc::new(AtomicBool::new(false)), threads: Vec::new(), counters: Arc::default() };
+        let rover_side = config.side == Side::Rover;
+        // The rover's host sends the first five, the viewer's the last four.
+        link.forward::<RendezvousStateMsg>(config, rover_side, MISSION, RENDEZVOUS_TOPIC)?;
+        link.forward::<EstimateMsg>(config, rover_side, MISSION, ESTIMATE_TOPIC)?;
+        link.forward::<PresenceMsg>(config, rover_side, MISSION, ROVER_PRESENCE_TOPIC)?;
+        link.forward::<AckMsg>(config, rover_side, MISSION, ROVER_ACK_TOPIC)?;
+        link.forward::<TrueStateMsg>(config, rover_side, SIM, TRUTH_TOPIC)?;
+        link.forward::<MeasurementMsg>(config, !rover_side, MISSION, MEASUREMENT_TOPIC)?;
+        link.forward::<PresenceMsg>(config, !rover_side, MISSION, VIEWER_PRESENCE_TOPIC)?;
+        link.forward::<AckMsg>(config, !rover_side, MISSION, VIEWER_ACK_TOPIC)?;
+        link.forward::<EvaluationAckMsg>(config, !rover_side, MISSION, EVALUATION_TOPIC)?;
+        tracing::info!(
+            side = config.side.name(),
+            mission = %config.topics.mission,
+            listen = ?config.listen,
+            connect = ?config.connect,
+            authenticated = config.credentials.is_some(),
+            "link started (zenoh id {})",
+            link.session.zid()
+        );
+        Ok(link)
+    }
+
+    /// Starts the thread carrying `group/topic` outwards (`out`) or inwards.
+    fn forward<T: LinkMessage>(
+        &mut self,
+        config: &LinkConfig,
+        out: bool,
+        group: &str,
+        topic: &str,
+    ) -> Result<(), LinkStartError> {
+        let mission = config.topics.mission.clone();
+        let key = key_expr(&mission, group, topic);
+        let (topics_config, group, topic) = (config.topics.clone(), group.to_string(), topic.to_string());
+        let (stop, counters, session) = (self.stop.clone(), self.counters.clone(), self.session.clone());
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), LinkStartError>>();
+        let name = format!("link-{}{topic}", if out { ">" } else { "<" });
+        let thread = std::thread::Builder::new()
+            .name(name)
+            .spawn(move || {
+                let topics = match Topics::open(&topics_config) {
+                    Ok(t) => t,
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e.into()));
+                        return;
+                    }
+                };
+                if out {
+                    let opened =
+                        topics.inbox::<T>(&group, &topic, MAX_BUFFER).map_err(LinkStartError::from).and_then(|inbox| {
+                            session
+                                .declare_publisher(key.clone())
+                                .congestion_control(zenoh::qos::CongestionControl::Block)
+                                .express(true)
+                                .wait()
+                                .map(|p| (inbox, p))
+                                .map_err(|e| LinkStartError::Zenoh(e.to_string()))
+                        });
+                    let (inbox, publisher) = match opened {
+                        Ok(o) => {
+                            let _ = ready_tx.send(Ok(()));
+                            o
+                        }
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(e));
+                            return;
+                        }
+                    };
+                    while !stop.load(Ordering::Relaxed) {
+                        let Some(msg) = inbox.recv_timeout(NAP, &|| stop.load(Ordering::Relaxed)) else { continue };
+                        match publisher.put(encode(&mission, &msg)).wait() {
+                            Ok(()) => {
+                                counters.sent.fetch_add(1, Ordering::Relaxed);
+                            }
+                            Err(e) => tracing::warn!(key = %key, "not sent: {e}"),
+                        }
+                    }
+                } else {
+                    let opened = topics.outbox::<T>(&group, &topic).map_err(LinkStartError::from).and_then(|outbox| {
+                        session
+                            .declare_subscriber(key.clone())
+                            .with(zenoh::handlers::FifoChannel::new(MAX_BUFFER))
+                            .wait()
+                            .map(|s| (outbox, s))
+                            .map_err(|e| LinkStartError::Zenoh(e.to_string()))
+                    });
+                    let (outbox, subscriber) = match opened {
+                        Ok(o) => {
+                            let _ = ready_tx.send(Ok(()));
+                            o
+                        }
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(e));
+                            return;
+                        }
+                    };
+                    while !stop.load(Ordering::Relaxed) {
+                        let sample = match subscriber.recv_timeout(NAP) {
+                            Ok(Some(s)) => s,
+                            Ok(None) => continue,
+                            Err(_) => break,
+                        };
+                        match decode::<T>(&mission, &sample.payload().to_bytes()) {
+                            Ok(msg) => match outbox.send(msg) {
+                                Ok(_) => {
+                                    counters.received.fetch_add(1, Ordering::Relaxed);
+                                }
+                                Err(e) => tracing::warn!("cannot hand on a message from the link: {e}"),
+                            },
+                            Err(e) => {
+                                counters.dropped.fetch_add(1, Ordering::Relaxed);
+                                tracing::warn!(key = %key, "dropped a message from the link: {e}");
+                            }
+                        }
+                    }
+                }
+            })
+            .map_err(|e| LinkStartError::Zenoh(format!("cannot start a thread: {e}")))?;
+        self.threads.push(thread);
+        ready_rx.recv().unwrap_or_else(|_| Err(LinkStartError::Zenoh("a link thread ended at start".into())))
+    }
+
+    /// What the link has done so far.
+    pub fn stats(&self) -> LinkStats {
+        LinkStats {
+            sent: self.counters.sent.load(Ordering::Relaxed),
+            received: self.counters.received.load(Ordering::Relaxed),
+            dropped: self.counters.dropped.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Whether the other host is connected now.
+    pub fn connected(&self) -> bool {
+        self.session.info().peers_zid().wait().next().is_some()
+    }
+
+    /// Stops forwarding, closes the session; returns the final counts.
+    pub fn stop(mut self) -> LinkStats {
+        self.shutdown();
+        self.stats()
+    }
+
+    fn shutdown(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+        let _ = self.session.close().wait();
+    }
+}
+
+impl Drop for Link {
+    fn drop(&mut self) {
+        if !self.threads.is_empty() {
+            self.shutdown();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dyfos_shared::posterior::Belief;
+
+    fn rendezvous() -> RendezvousStateMsg {
+        let belief = Belief::new([1.0, 2.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
+        RendezvousStateMsg::from(&RendezvousState::Rendezvous { step: 3, sim_time: 1.5, belief })
+    }
+
+    #[test]
+    fn frames_round_trip_and_bad_ones_are_dropped_with_the_reason() {
+        let msg = rendezvous();
+        let bytes = encode("m1", &msg);
+        assert_eq!(decode::<RendezvousStateMsg>("m1", &bytes).unwrap(), msg);
+        assert!(matches!(decode::<RendezvousStateMsg>("m2", &bytes), Err(FrameError::Mission(m)) if m == "m1"));
+        let mut old = bytes.clone();
+        old[0] = 9;
+        assert_eq!(decode::<RendezvousStateMsg>("m1", &old), Err(FrameError::Version(9)));
+        assert!(matches!(decode::<RendezvousStateMsg>("m1", &bytes[..bytes.len() - 3]), Err(FrameError::Malformed(_))));
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(matches!(decode::<RendezvousStateMsg>("m1", &longer), Err(FrameError::Malformed(_))));
+        let mut nan = msg;
+        nan.mean[0] = f64::NAN;
+        assert!(matches!(decode::<RendezvousStateMsg>("m1", &encode("m1", &nan)), Err(FrameError::Invalid(_))));
+        let far = MeasurementMsg { position: [1e9, 0.0], ..MeasurementMsg::from(&measurement()) };
+        assert!(matches!(decode::<MeasurementMsg>("m1", &encode("m1", &far)), Err(FrameError::Invalid(_))));
+        let bad_ack = AckMsg { instance: 1, step: 1, kind: 7 };
+        assert!(matches!(decode::<AckMsg>("m1", &encode("m1", &bad_ack)), Err(FrameError::Invalid(_))));
+        // A huge length prefix is refused by the size limit, not allocated.
+        let mut huge = bytes.clone();
+        huge[2..10].copy_from_slice(&u64::MAX.to_le_bytes());
+        assert!(decode::<RendezvousStateMsg>("m1", &huge).is_err());
+    }
+
+    fn measurement() -> Measurement {
+        use dyfos_shared::wire::mission::Observation;
+        Measurement {
+            step: 1,
+            sim_time: 0.0,
+            observation: Observation::Observed {
+                position: [0.0, 0.0],
+                r: dyfos_shared::math::Cov2::from_rows(&[[0.01, 0.0], [0.0, 0.01]]).unwrap(),
+            },
+            viewer: None,
+            predicted_cost: None,
+        }
+    }
+
+    #[test]
+    fn config_needs_a_safe_mission_name_an_endpoint_and_real_credentials() {
+        let topics = TopicsConfig { prefix: "p/".into(), domain: None, mission: "a/b".into() };
+        let mut c = LinkConfig::new(topics, Side::Rover);
+        c.listen.push("tcp/127.0.0.1:0".into());
+        assert!(matches!(zenoh_config(&c), Err(LinkStartError::MissionName(_))));
+        c.topics.mission = "m-1".into();
+        assert!(zenoh_config(&c).is_ok());
+        c.listen.clear();
+        assert!(matches!(zenoh_config(&c), Err(LinkStartError::NoEndpoint)));
+        c.listen.push("tcp/127.0.0.1:0".into());
+        let file = std::env::temp_dir().join(format!("dyfos-link-cred-{}", std::process::id()));
+        std::fs::write(&file, "crew:short\n").unwrap();
+        c.credentials = Some(file.clone());
+        assert!(matches!(zenoh_config(&c), Err(LinkStartError::Credentials { .. })));
+        std::fs::write(&file, "crew:a-long-secret\n").unwrap();
+        assert!(zenoh_config(&c).is_ok(), "{:?}", zenoh_config(&c).err());
+        let _ = std::fs::remove_file(&file);
+    }
+}
