@@ -23,8 +23,9 @@ if [ ! -x "$venv/bin/maturin" ] || ! "$venv/bin/python" -c "import pytest, numpy
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "maturin>=1.9.4,<2" "pytest>=7" numpy
 fi
 
-# The daemon and CLI under test (a no-op when `cargo build --workspace --bins` ran).
-(cd "$root" && cargo build --quiet --workspace --bins)
+# The daemon and CLI under test (a no-op after scripts/test's build; --all-targets
+# as there, so the features match and nothing is built twice).
+(cd "$root" && cargo build --quiet --workspace --all-targets)
 
 # Build the extension module and install the package into the venv (editable).
 (cd "$here" && VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" "$venv/bin/maturin" develop --quiet)

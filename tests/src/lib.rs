@@ -38,7 +38,7 @@ pub fn bin(name: &str) -> PathBuf {
     let path = bin_dir().join(name);
     assert!(
         path.exists(),
-        "{} is missing: run `cargo build --workspace --bins --examples` before `cargo test`",
+        "{} is missing: run `cargo build --workspace --all-targets` before `cargo test`",
         path.display()
     );
     path

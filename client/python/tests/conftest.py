@@ -32,7 +32,7 @@ _counter = itertools.count()
 def _binary(var: str, name: str) -> str:
     path = os.environ.get(var) or str(ROOT / "target" / "debug" / name)
     if not os.access(path, os.X_OK):
-        pytest.exit(f"{path} is missing: run `cargo build --workspace --bins` or set {var}", returncode=2)
+        pytest.exit(f"{path} is missing: run `cargo build --workspace --all-targets` or set {var}", returncode=2)
     return path
 
 
