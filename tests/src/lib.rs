@@ -279,6 +279,28 @@ pub fn data(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(path)
 }
 
+/// A scenario whose searches take minutes (for tests about what happens while searches
+/// run): `hard_01` with 4096 perimeter points (SPEC's most, 4097 sight lines a
+/// candidate) and a 5 cm voxel grid whose two cells, at opposite corners, span the
+/// whole search space. The grid alone no longer makes a search slow (its tree skips
+/// empty space); the sight lines do.
+pub fn slow_search_scenario() -> dyfos_shared::scenario::Scenario {
+    use dyfos_shared::world::MapDelta;
+    let text = std::fs::read_to_string(data("golden/scenarios/hard/hard_01.json")).expect("hard_01");
+    let mut s = dyfos_shared::scenario::Scenario::from_json(&text).expect("hard_01 parses");
+    s.params.perimeter_points = dyfos_shared::limits::MAX_PERIMETER_POINTS;
+    let resolution = 0.05;
+    let (cells_xy, cells_z) = ((24.0 / resolution) as i64, (12.0 / resolution) as i64);
+    let voxels = MapDelta::SetVoxels {
+        resolution,
+        origin: dyfos_shared::math::Point3::new(-12.0, -12.0, 0.0),
+        cells: vec![[0, 0, 0], [cells_xy - 1, cells_xy - 1, cells_z - 1]],
+        occupied: true,
+    };
+    s.world = s.world.apply(&[voxels]).expect("voxels fit the map");
+    s
+}
+
 /// An answer's JSON without its compute time, for bit-for-bit comparisons
 /// (`serde_json` prints every `f64` so that it reads back exactly).
 pub fn without_micros(mut json: serde_json::Value) -> serde_json::Value {

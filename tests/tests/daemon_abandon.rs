@@ -8,32 +8,18 @@
 //! the assertions are on the daemon's counters, polled with [`wait_for`].
 
 use dyfos_client::prelude::*;
-use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, data, signal, wait_for};
+use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, signal, wait_for};
 use std::process::Stdio;
 use std::time::Duration;
 
-const SCENARIO: &str = "golden/scenarios/hard/hard_01.json";
-
-/// `hard_01` with 4096 perimeter points (SPEC's most): each candidate checks 4097
-/// sight lines, so a search takes seconds whatever the map's acceleration (the voxel
-/// grid alone no longer makes it slow: its tree skips empty space).
+/// The slow scenario ([`dyfos_tests::slow_search_scenario`]).
 fn scenario() -> Scenario {
-    let mut s = Scenario::from_json(&std::fs::read_to_string(data(SCENARIO)).unwrap()).unwrap();
-    s.params.perimeter_points = dyfos_shared::limits::MAX_PERIMETER_POINTS;
-    s
+    dyfos_tests::slow_search_scenario()
 }
 
-/// `hard_01`'s world with a fine voxel grid over the whole search space.
+/// Its world: map 1 of these tests.
 fn slow_world() -> World {
-    let resolution = 0.05;
-    let (cells_xy, cells_z) = ((24.0 / resolution) as i64, (12.0 / resolution) as i64);
-    let voxels = MapDelta::SetVoxels {
-        resolution,
-        origin: na::Point3::new(-12.0, -12.0, 0.0),
-        cells: vec![[0, 0, 0], [cells_xy - 1, cells_xy - 1, cells_z - 1]],
-        occupied: true,
-    };
-    scenario().world.apply(&[voxels]).unwrap()
+    scenario().world
 }
 
 /// A daemon with two workers (so one `brute` query may run at a time) and

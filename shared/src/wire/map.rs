@@ -406,6 +406,14 @@ pub fn record_count(delta: &MapDelta) -> usize {
     }
 }
 
+/// The header of a voxel run (`VOXEL_RUN`) or block run (`VOXEL_BLOCK_RUN`) of `n` records.
+fn run_header(tag: u32, resolution: f64, origin: &Point3<f64>, occupied: bool, n: usize) -> WireDelta {
+    let mut r = WireDelta { tag, flag: u32::from(occupied), ..Default::default() };
+    r.values[..4].copy_from_slice(&[resolution, origin.x, origin.y, origin.z]);
+    r.cell[0] = n as i64;
+    r
+}
+
 fn push_delta(out: &mut Vec<WireDelta>, delta: &MapDelta) {
     let mut r = WireDelta::default();
     match delta {
@@ -424,20 +432,12 @@ fn push_delta(out: &mut Vec<WireDelta>, delta: &MapDelta) {
             r.id = *id;
         }
         MapDelta::SetVoxels { resolution, origin, cells, occupied } => {
-            r.tag = tag::VOXEL_RUN;
-            r.flag = u32::from(*occupied);
-            r.values[..4].copy_from_slice(&[*resolution, origin.x, origin.y, origin.z]);
-            r.cell[0] = cells.len() as i64;
-            out.push(r);
+            out.push(run_header(tag::VOXEL_RUN, *resolution, origin, *occupied, cells.len()));
             out.extend(cells.iter().map(|c| WireDelta { tag: tag::VOXEL_CELL, cell: *c, ..Default::default() }));
             return;
         }
         MapDelta::SetVoxelBlocks { resolution, origin, blocks, occupied } => {
-            r.tag = tag::VOXEL_BLOCK_RUN;
-            r.flag = u32::from(*occupied);
-            r.values[..4].copy_from_slice(&[*resolution, origin.x, origin.y, origin.z]);
-            r.cell[0] = blocks.len() as i64;
-            out.push(r);
+            out.push(run_header(tag::VOXEL_BLOCK_RUN, *resolution, origin, *occupied, blocks.len()));
             out.extend(blocks.iter().map(|b| WireDelta {
                 tag: tag::VOXEL_BLOCK,
                 id: b.mask as u32,
