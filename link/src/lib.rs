@@ -206,30 +206,23 @@ pub trait LinkMessage: Debug + Copy + ZeroCopySend + Serialize + DeserializeOwne
     fn validate(&self) -> Result<(), String>;
 }
 
-impl LinkMessage for RendezvousStateMsg {
-    fn validate(&self) -> Result<(), String> {
-        RendezvousState::try_from(self).map(|_| ()).map_err(|e| e.to_string())
-    }
+/// `LinkMessage` for wire messages checked by converting them into their typed form.
+macro_rules! checked_by_conversion {
+    ($($wire:ty => $typed:ty),* $(,)?) => {
+        $(impl LinkMessage for $wire {
+            fn validate(&self) -> Result<(), String> {
+                <$typed>::try_from(self).map(|_| ()).map_err(|e| e.to_string())
+            }
+        })*
+    };
 }
-impl LinkMessage for MeasurementMsg {
-    fn validate(&self) -> Result<(), String> {
-        Measurement::try_from(self).map(|_| ()).map_err(|e| e.to_string())
-    }
-}
-impl LinkMessage for EstimateMsg {
-    fn validate(&self) -> Result<(), String> {
-        Estimate::try_from(self).map(|_| ()).map_err(|e| e.to_string())
-    }
-}
-impl LinkMessage for TrueStateMsg {
-    fn validate(&self) -> Result<(), String> {
-        TrueState::try_from(self).map(|_| ()).map_err(|e| e.to_string())
-    }
-}
-impl LinkMessage for AckMsg {
-    fn validate(&self) -> Result<(), String> {
-        Ack::try_from(self).map(|_| ()).map_err(|e| e.to_string())
-    }
+
+checked_by_conversion! {
+    RendezvousStateMsg => RendezvousState,
+    MeasurementMsg => Measurement,
+    EstimateMsg => Estimate,
+    TrueStateMsg => TrueState,
+    AckMsg => Ack,
 }
 impl LinkMessage for PresenceMsg {
     fn validate(&self) -> Result<(), String> {
