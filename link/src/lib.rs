@@ -200,6 +200,24 @@ pub enum FrameError {
     Invalid(String),
 }
 
+/// Tells the starting thread whether a topic's pair of ports opened, and gives the
+/// pair back if it did.
+fn announce<T>(
+    opened: Result<T, LinkStartError>,
+    ready: &std::sync::mpsc::Sender<Result<(), LinkStartError>>,
+) -> Option<T> {
+    match opened {
+        Ok(pair) => {
+            let _ = ready.send(Ok(()));
+            Some(pair)
+        }
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            None
+        }
+    }
+}
+
 /// A message type that may cross the link: checked on arrival as on any wire.
 pub trait LinkMessage: Debug + Copy + ZeroCopySend + Serialize + DeserializeOwned + Send + 'static {
     /// `Err(why)` when the message must be dropped.
@@ -433,16 +451,7 @@ impl Link {
                                 .map(|p| (inbox, p))
                                 .map_err(|e| LinkStartError::Zenoh(e.to_string()))
                         });
-                    let (inbox, publisher) = match opened {
-                        Ok(o) => {
-                            let _ = ready_tx.send(Ok(()));
-                            o
-                        }
-                        Err(e) => {
-                            let _ = ready_tx.send(Err(e));
-                            return;
-                        }
-                    };
+                    let Some((inbox, publisher)) = announce(opened, &ready_tx) else { return };
                     while !stop.load(Ordering::Relaxed) {
                         let Some(msg) = inbox.recv_timeout(NAP, &|| stop.load(Ordering::Relaxed)) else { continue };
                         match publisher.put(encode(&mission, &msg)).wait() {
@@ -461,16 +470,7 @@ impl Link {
                             .map(|s| (outbox, s))
                             .map_err(|e| LinkStartError::Zenoh(e.to_string()))
                     });
-                    let (outbox, subscriber) = match opened {
-                        Ok(o) => {
-                            let _ = ready_tx.send(Ok(()));
-                            o
-                        }
-                        Err(e) => {
-                            let _ = ready_tx.send(Err(e));
-                            return;
-                        }
-                    };
+                    let Some((outbox, subscriber)) = announce(opened, &ready_tx) else { return };
                     while !stop.load(Ordering::Relaxed) {
                         let sample = match subscriber.recv_timeout(NAP) {
                             Ok(Some(s)) => s,
