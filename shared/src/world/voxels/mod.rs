@@ -407,6 +407,16 @@ mod tests {
             .min_by(f64::total_cmp)
     }
 
+    /// Asserts that the walk and every cell as a box agree on `seg`; whether it hits.
+    fn agrees_with_boxes(grid: &VoxelGrid, seg: &Segment) -> bool {
+        let (a, b) = (grid.first_contact(seg), brute(grid, seg));
+        match (a, b) {
+            (Some(x), Some(y)) => assert!((x - y).abs() < 1e-9, "{seg:?}: walk {x} vs boxes {y}"),
+            _ => assert_eq!(a, b, "{seg:?}"),
+        }
+        b.is_some()
+    }
+
     /// A tiny deterministic generator (the shared crate does not depend on rand).
     struct Lcg(u64);
     impl Lcg {
@@ -443,12 +453,7 @@ mod tests {
                 (o, d)
             };
             let seg = Segment::closed(o, d.normalize(), rng.next() * 5.0);
-            let (a, b) = (grid.first_contact(&seg), brute(&grid, &seg));
-            match (a, b) {
-                (Some(x), Some(y)) => assert!((x - y).abs() < 1e-9, "{seg:?}: walk {x} vs boxes {y}"),
-                _ => assert_eq!(a, b, "{seg:?}"),
-            }
-            hits += usize::from(b.is_some());
+            hits += usize::from(agrees_with_boxes(&grid, &seg));
         }
         assert!(hits > 1000, "too few hits ({hits}) to mean anything");
     }
@@ -502,12 +507,7 @@ mod tests {
                 (o, d)
             };
             let seg = Segment::closed(o, d.normalize(), rng.next() * 30.0);
-            let (a, b) = (grid.first_contact(&seg), brute(&grid, &seg));
-            match (a, b) {
-                (Some(x), Some(y)) => assert!((x - y).abs() < 1e-9, "{seg:?}: walk {x} vs boxes {y}"),
-                _ => assert_eq!(a, b, "{seg:?}"),
-            }
-            hits += usize::from(b.is_some());
+            hits += usize::from(agrees_with_boxes(&grid, &seg));
         }
         assert!(hits > 1000, "too few hits ({hits}) to mean anything");
     }
