@@ -2,6 +2,7 @@
 
 use crate::Ipc;
 use crate::error::{CallError, ClientOpenError, MapRequestError, RendezvousError, StatsRequestError};
+use crate::idle::IdleCores;
 use dyfos_shared::answer::Answer;
 use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS};
 use dyfos_shared::wire::map::{
@@ -39,7 +40,8 @@ pub struct ClientConfig {
     /// How long [`Client::connect`] (and a reconnect) waits for the daemon to appear.
     pub connect_timeout: Duration,
     /// How long to poll for a reply (yielding the core between polls) before
-    /// sleeping on the reply event. Replies within the window arrive without an event
+    /// sleeping on the reply event; the client sleeps at once, after a 50 µs poll,
+    /// while every core is taken (`dyfos_client::idle`). Replies within the window arrive without an event
     /// wake-up, which costs 50–100 µs on a 2-core VM. The default, 1 ms, covers a
     /// typical `dyfos` query (≈0.55 ms); longer windows cut a lone client's latency a
     /// little more but cost throughput when more clients than cores poll at once
@@ -92,6 +94,8 @@ struct Connection {
     wake: Notifier<Ipc>,
     reply: Listener<Ipc>,
     reply_to: [u64; 2],
+    /// Whether polling for a reply may yield (a core is idle) or should sleep.
+    idle: IdleCores,
 }
 
 enum Opened {
@@ -182,6 +186,7 @@ impl Connection {
             wake: wake.notifier_builder().create().map_err(open_ipc)?,
             reply: reply_listener,
             reply_to,
+            idle: IdleCores::of_this_machine(),
             node,
         })))
     }
@@ -215,9 +220,13 @@ impl Connection {
                 std::hint::spin_loop();
                 continue;
             }
-            if elapsed < spin {
-                // Yield rather than burn the core: on a busy machine the daemon may
-                // need this very core to answer.
+            if elapsed < spin && !self.idle.busy() {
+                // Yield rather than burn the core: the daemon may need this very core
+                // to answer. Only while a core is idle: when every core is taken
+                // (the workers search, other clients wait), a thread that yields
+                // stays runnable and delays whoever wakes next, e.g. another
+                // process's cheap request, by a time slice; sleeping on the reply
+                // event costs this wait a wake-up instead.
                 std::thread::yield_now();
                 continue;
             }

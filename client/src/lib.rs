@@ -30,6 +30,7 @@ mod error;
 
 pub mod cli;
 pub mod eval;
+pub mod idle;
 pub mod logging;
 pub mod mission;
 pub mod rover;

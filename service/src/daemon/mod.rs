@@ -319,8 +319,9 @@ pub struct Daemon {
     /// exponentially weighted), which sizes the polling window.
     last_arrival: Instant,
     arrival_gap_us: f64,
-    /// Whether every core is taken, looked up at most every [`IdleCores::EVERY`].
-    cores: sched::IdleCores,
+    /// Whether every core is taken, looked up at most every
+    /// [`IdleCores::EVERY`](dyfos_client::idle::IdleCores::EVERY).
+    cores: dyfos_client::idle::IdleCores,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -506,7 +507,7 @@ impl Daemon {
             ipc_scheduling,
             last_arrival: Instant::now(),
             arrival_gap_us: f64::INFINITY,
-            cores: sched::IdleCores::new(cores),
+            cores: dyfos_client::idle::IdleCores::new(cores),
         })
     }
 

@@ -5,54 +5,7 @@
 //! Linux only; elsewhere every call here does nothing. The libc calls are the only
 //! unsafe code of the daemon; each says why it is sound.
 
-use std::time::{Duration, Instant};
 use tracing::{info, warn};
-
-/// Whether the machine has an idle core, from the count of runnable threads in
-/// `/proc/loadavg` (kept open; one `pread` of a few bytes, about 2 µs), looked up
-/// at most every [`IdleCores::EVERY`].
-#[derive(Debug)]
-pub(crate) struct IdleCores {
-    file: Option<std::fs::File>,
-    cores: usize,
-    checked: Option<Instant>,
-    busy: bool,
-}
-
-impl IdleCores {
-    /// How long a look-up is trusted.
-    pub(crate) const EVERY: Duration = Duration::from_micros(100);
-
-    pub(crate) fn new(cores: usize) -> Self {
-        IdleCores { file: std::fs::File::open("/proc/loadavg").ok(), cores, checked: None, busy: false }
-    }
-
-    /// Whether other runnable threads than the caller fill every core (false when
-    /// unknown).
-    pub(crate) fn busy(&mut self) -> bool {
-        if self.checked.is_some_and(|t| t.elapsed() < Self::EVERY) {
-            return self.busy;
-        }
-        self.checked = Some(Instant::now());
-        self.busy = self.runnable().is_some_and(|n| n.saturating_sub(1) >= self.cores);
-        self.busy
-    }
-
-    /// Runnable threads now, the caller included: `/proc/loadavg`'s fourth field
-    /// is `RUNNABLE/TOTAL`.
-    fn runnable(&self) -> Option<usize> {
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::FileExt;
-            let mut buf = [0u8; 64];
-            let n = self.file.as_ref()?.read_at(&mut buf, 0).ok()?;
-            let text = std::str::from_utf8(&buf[..n]).ok()?;
-            text.split_whitespace().nth(3)?.split('/').next()?.parse().ok()
-        }
-        #[cfg(not(unix))]
-        None
-    }
-}
 
 /// What the IPC thread got at start.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
