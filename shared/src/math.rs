@@ -157,6 +157,22 @@ pub fn det2(m: &Matrix2<f64>) -> f64 {
     m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)]
 }
 
+/// `v.floor()`, the same value for every input (NaN and infinities included), inline:
+/// without SSE4.1, which baseline x86-64 builds do not assume, `f64::floor` is a
+/// library call, and the voxel walk floors a few coordinates per step.
+#[inline(always)]
+pub fn floor(v: f64) -> f64 {
+    // From 2^52 on every f64 is an integer; NaN fails the comparison and is returned.
+    if v.abs() < 4_503_599_627_370_496.0 {
+        let t = v as i64 as f64;
+        let f = if t > v { t - 1.0 } else { t };
+        // The cast loses the sign of -0.0, which `f64::floor` keeps.
+        if f == 0.0 { f.copysign(v) } else { f }
+    } else {
+        v
+    }
+}
+
 /// Rows of a 3×3 matrix, for JSON output.
 pub fn rows3(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
     std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
@@ -164,6 +180,23 @@ pub fn rows3(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn floor_is_f64_floor() {
+        let mut values = vec![0.0, -0.0, 0.3, -0.3, 1.0, -1.0, 2.5, -2.5, 1e-300, -1e-300, f64::NAN, f64::INFINITY];
+        values.extend([f64::NEG_INFINITY, 4_503_599_627_370_495.5, -4_503_599_627_370_495.5, 9.3e18, -9.3e18, 1e300]);
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        for _ in 0..100_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            values.push(f64::from_bits(x));
+            values.push((x as i64 >> 20) as f64 / 1024.0);
+        }
+        for v in values {
+            assert_eq!(super::floor(v).to_bits(), v.floor().to_bits(), "floor({v:e})");
+        }
+    }
+
     use super::*;
 
     #[test]

@@ -21,7 +21,7 @@ mod walk;
 use super::obstacle::{ObstacleError, finite};
 use super::segment::{Segment, clip_slab};
 use crate::limits::{MAX_OCCUPIED_VOXELS, MAX_VOXEL_BLOCKS_SPANNED, MAX_VOXEL_INDEX};
-use crate::math::Point3;
+use crate::math::{Point3, floor};
 use tree::{Tree, TreeLimit};
 
 /// A cell index (i, j, k): the closed cube `origin + resolution·[i, i+1]×[j, j+1]×[k, k+1]`.
@@ -350,8 +350,8 @@ impl VoxelGrid {
         let mut last = [0i64; 3];
         for a in 0..3 {
             // Cells whose closed cube meets [lo, hi], one more on each side for rounding.
-            let f = ((lo[a] - self.origin[a]) / self.resolution).floor() - 2.0;
-            let l = ((hi[a] - self.origin[a]) / self.resolution).floor() + 1.0;
+            let f = floor((lo[a] - self.origin[a]) / self.resolution) - 2.0;
+            let l = floor((hi[a] - self.origin[a]) / self.resolution) + 1.0;
             if !(f.is_finite() && l.is_finite()) {
                 return true;
             }
@@ -385,7 +385,17 @@ impl VoxelGrid {
         }
         let walk = walk::Walk::new(&self.tree, self.resolution, self.origin, seg, lo, end);
         let mut best = f64::INFINITY;
-        walk.walk::<{ walk::TOP }>(t0, t1, &mut best);
+        // Each level's walk is exact on its own; the coarser ones only skip empty
+        // space faster. A segment within a block or two of a level gains nothing
+        // from the levels above it but their set-up, so it starts lower.
+        let cells = (t1 - t0) / self.resolution;
+        if cells < 16.0 {
+            walk.walk::<1>(t0, t1, &mut best);
+        } else if cells < 64.0 {
+            walk.walk::<2>(t0, t1, &mut best);
+        } else {
+            walk.walk::<{ walk::TOP }>(t0, t1, &mut best);
+        }
         best.is_finite().then_some(best)
     }
 }

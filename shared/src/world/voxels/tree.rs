@@ -149,6 +149,48 @@ impl Node {
         (self.lo, self.hi) = (lo, hi);
     }
 
+    /// [`Tree::any_in_box`] within this node (key `key`), spending `budget` a brick.
+    #[inline]
+    fn any_in_box(&self, budget: &mut u32, key: [i64; 3], lo: CellIndex, hi: CellIndex) -> Option<bool> {
+        // The box in cells from the node's corner, cut to the occupied cells' box.
+        let mut l = [0i64; 3];
+        let mut h = [0i64; 3];
+        for a in 0..3 {
+            let base = key[a] << NODE_SHIFT;
+            l[a] = (lo[a] - base).max(self.lo[a]);
+            h[a] = (hi[a] - base).min(self.hi[a]);
+            if l[a] > h[a] {
+                return Some(false);
+            }
+        }
+        let mut bx = l[0] >> 3;
+        while bx <= h[0] >> 3 {
+            let (x0, x1) = ((l[0] - bx * 8).max(0) as usize, (h[0] - bx * 8).min(7) as usize);
+            let mut by = l[1] >> 3;
+            while by <= h[1] >> 3 {
+                let (y0, y1) = ((l[1] - by * 8).max(0), (h[1] - by * 8).min(7));
+                // Bytes y0..=y1 of a brick word.
+                let rows = (u64::MAX >> (8 * (7 - y1))) & (u64::MAX << (8 * y0));
+                let mut bz = l[2] >> 3;
+                while bz <= h[2] >> 3 {
+                    *budget = budget.checked_sub(1)?;
+                    if let Some(bits) = self.brick(slot_of(bx, by, bz)) {
+                        let (z0, z1) = ((l[2] - bz * 8).max(0), (h[2] - bz * 8).min(7));
+                        // Bits z0..=z1 of every byte, then only the rows inside.
+                        let yz = rows & (((0xffu64 >> (7 - z1 + z0)) << z0) * 0x0101_0101_0101_0101);
+                        if bits[x0..=x1].iter().any(|w| w & yz != 0) {
+                            return Some(true);
+                        }
+                    }
+                    bz += 1;
+                }
+                by += 1;
+            }
+            bx += 1;
+        }
+        Some(false)
+    }
+
     /// The non-empty bricks in slot order: (brick's minimum cell, bits).
     fn bricks_in_order(&self) -> impl Iterator<Item = (CellIndex, &Bits)> + '_ {
         let base = self.key.map(|k| k << NODE_SHIFT);
@@ -240,41 +282,30 @@ impl Tree {
     /// empty, `Some(true)` found, `None` when that would take more than `budget`
     /// node and brick lookups.
     pub(super) fn any_in_box(&self, lo: CellIndex, hi: CellIndex, mut budget: u32) -> Option<bool> {
-        let range = |shift: u32, a: usize| (lo[a] >> shift)..=(hi[a] >> shift);
         // Give up before any work when the box's bricks alone exceed the budget.
         let bricks = (0..3).try_fold(1u64, |n, a| n.checked_mul(((hi[a] >> 3) - (lo[a] >> 3) + 1).max(0) as u64));
         if bricks.is_none_or(|b| b > u64::from(budget)) {
             return None;
         }
-        for nx in range(NODE_SHIFT, 0) {
-            for ny in range(NODE_SHIFT, 1) {
-                for nz in range(NODE_SHIFT, 2) {
+        // Plain loops over inclusive bounds: this runs for most candidates (the
+        // collision star's box), and range iterators cost more than the lookups.
+        let mut nx = lo[0] >> NODE_SHIFT;
+        while nx <= hi[0] >> NODE_SHIFT {
+            let mut ny = lo[1] >> NODE_SHIFT;
+            while ny <= hi[1] >> NODE_SHIFT {
+                let mut nz = lo[2] >> NODE_SHIFT;
+                while nz <= hi[2] >> NODE_SHIFT {
                     budget = budget.checked_sub(1)?;
-                    let Some(node) = self.node([nx, ny, nz]) else { continue };
-                    // The bricks of this node inside the box.
-                    let clamp = |n: i64, a: usize| {
-                        let base = n << NODE_SHIFT;
-                        (lo[a].max(base), hi[a].min(base + (1 << NODE_SHIFT) - 1))
-                    };
-                    let (bx, by, bz) = (clamp(nx, 0), clamp(ny, 1), clamp(nz, 2));
-                    for x in (bx.0 >> 3)..=(bx.1 >> 3) {
-                        for y in (by.0 >> 3)..=(by.1 >> 3) {
-                            for z in (bz.0 >> 3)..=(bz.1 >> 3) {
-                                budget = budget.checked_sub(1)?;
-                                let Some(bits) = node.brick(slot_of(x & 7, y & 7, z & 7)) else { continue };
-                                // Cells of the brick inside the box: x words, y-z mask.
-                                let span = |v: i64, (l, h): (i64, i64)| ((l - v * 8).max(0), (h - v * 8).min(7));
-                                let ((x0, x1), (y0, y1), (z0, z1)) = (span(x, bx), span(y, by), span(z, bz));
-                                let zs: u64 = (0xffu64 >> (7 - z1 + z0)) << z0;
-                                let yz = (y0..=y1).fold(0u64, |m, yy| m | zs << (yy * 8));
-                                if (x0..=x1).any(|xx| bits[xx as usize] & yz != 0) {
-                                    return Some(true);
-                                }
-                            }
-                        }
+                    if let Some(node) = self.node([nx, ny, nz])
+                        && node.any_in_box(&mut budget, [nx, ny, nz], lo, hi)?
+                    {
+                        return Some(true);
                     }
+                    nz += 1;
                 }
+                ny += 1;
             }
+            nx += 1;
         }
         Some(false)
     }

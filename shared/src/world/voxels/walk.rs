@@ -14,7 +14,7 @@
 
 use super::CellIndex;
 use super::tree::{BRICK_SHIFT, NODE_SHIFT, Tree};
-use crate::math::Point3;
+use crate::math::{Point3, floor};
 use crate::world::segment::{Segment, clip_slab};
 
 /// One query: the tree, the grid's placement and the segment.
@@ -88,8 +88,10 @@ impl<'a> Walk<'a> {
             // Snap entry points within 1e-9 cells of a plane onto it, so rounding in
             // the clip does not decide whether a face or edge is touched.
             let raw = g(t0, a).clamp((box_lo[a] - 1) as f64, box_end[a] as f64);
-            let ga = if (raw - raw.round()).abs() < 1e-9 { raw.round() } else { raw };
-            let fa = ga.floor();
+            // (`floor(raw + 0.5)` is `raw.round()` within 1e-9 of an integer, all that matters here.)
+            let near = floor(raw + 0.5);
+            let ga = if (raw - near).abs() < 1e-9 { near } else { raw };
+            let fa = floor(ga);
             cell[a] = fa as i64;
             let on_plane = ga == fa;
             let d = seg.dir[a];
@@ -158,7 +160,7 @@ impl<'a> Walk<'a> {
         let mut lo = [0i64; 3];
         let mut hi = [0i64; 3];
         for i in 0..3 {
-            let to_cell = |v: f64| ((v - self.origin[i]) * self.inv_resolution).floor();
+            let to_cell = |v: f64| floor((v - self.origin[i]) * self.inv_resolution);
             let (l, h) = (to_cell(a[i].min(b[i])) - 2.0, to_cell(a[i].max(b[i])) + 1.0);
             if !(l.is_finite() && h.is_finite()) {
                 return false;
@@ -190,7 +192,10 @@ impl<'a> Walk<'a> {
     ) {
         let tied_mask = (0..3).fold(0u8, |m, a| m | u8::from(tied[a]) << a);
         let movable = (0..3).fold(tied_mask, |m, a| m | u8::from(twin[a]) << a);
-        for mask in 0u8..8 {
+        // The common step: one axis crossed, no face or edge grazed. Only `cell`
+        // itself is new.
+        let masks = if movable & movable.wrapping_sub(1) == 0 && movable == tied_mask { 1 } else { 8 };
+        for mask in 0u8..masks {
             // Un-stepping every tied axis (and nothing else) is the cell the walk just
             // left: checked (or walked into) when it was reached.
             if mask & !movable != 0 || (mask != 0 && mask == tied_mask) {
