@@ -53,6 +53,14 @@ fn slot_of(x: i64, y: i64, z: i64) -> usize {
     ((x * 8 + y) * 8 + z) as usize
 }
 
+/// The bits `8y + z` of a brick word (or of a node's `present` word) with y in
+/// `y0..=y1` and z in `z0..=z1`, each range within 0..8.
+#[inline]
+fn rows_and_columns(y0: i64, y1: i64, z0: i64, z1: i64) -> u64 {
+    let rows = (u64::MAX >> (8 * (7 - y1))) & (u64::MAX << (8 * y0));
+    rows & (((0xffu64 >> (7 - z1 + z0)) << z0) * 0x0101_0101_0101_0101)
+}
+
 /// Up to 8³ bricks: 64³ cells.
 #[derive(Clone, Debug)]
 pub(super) struct Node {
@@ -62,6 +70,10 @@ pub(super) struct Node {
     slots: [u16; SLOTS],
     /// The non-empty bricks, with their slot.
     bricks: Vec<(u16, Bits)>,
+    /// Which bricks are non-empty, laid out as a brick's cells (word x, bit 8y + z):
+    /// a box test over the bricks is then the same few word operations as over
+    /// the cells of one brick.
+    present: Bits,
     /// Occupied cells.
     cells: u32,
     /// The occupied cells' bounding box, in cells from the node's minimum corner,
@@ -72,7 +84,7 @@ pub(super) struct Node {
 
 impl Node {
     fn new(key: [i64; 3]) -> Self {
-        Node { key, slots: [0; SLOTS], bricks: Vec::new(), cells: 0, lo: [0; 3], hi: [0; 3] }
+        Node { key, slots: [0; SLOTS], bricks: Vec::new(), present: [0; 8], cells: 0, lo: [0; 3], hi: [0; 3] }
     }
 
     #[inline]
@@ -90,6 +102,7 @@ impl Node {
             }
             self.bricks.push((slot as u16, *bits));
             self.slots[slot] = self.bricks.len() as u16;
+            self.present[slot >> 6] |= 1 << (slot & 63);
             self.cells += bits.iter().map(|w| w.count_ones()).sum::<u32>();
             return;
         }
@@ -103,6 +116,7 @@ impl Node {
         self.cells = self.cells + after - before;
         if after == 0 {
             self.slots[slot] = 0;
+            self.present[slot >> 6] &= !(1 << (slot & 63));
             self.bricks.swap_remove(index);
             if let Some((moved, _)) = self.bricks.get(index) {
                 self.slots[usize::from(*moved)] = i;
@@ -149,7 +163,8 @@ impl Node {
         (self.lo, self.hi) = (lo, hi);
     }
 
-    /// [`Tree::any_in_box`] within this node (key `key`), spending `budget` a brick.
+    /// [`Tree::any_in_box`] within this node (key `key`), spending `budget` a brick
+    /// word and a brick looked into.
     #[inline]
     fn any_in_box(&self, budget: &mut u32, key: [i64; 3], lo: CellIndex, hi: CellIndex) -> Option<bool> {
         // The box in cells from the node's corner, cut to the occupied cells' box.
@@ -163,30 +178,36 @@ impl Node {
                 return Some(false);
             }
         }
-        let mut bx = l[0] >> 3;
-        while bx <= h[0] >> 3 {
-            let (x0, x1) = ((l[0] - bx * 8).max(0) as usize, (h[0] - bx * 8).min(7) as usize);
-            let mut by = l[1] >> 3;
-            while by <= h[1] >> 3 {
-                let (y0, y1) = ((l[1] - by * 8).max(0), (h[1] - by * 8).min(7));
-                // Bytes y0..=y1 of a brick word.
-                let rows = (u64::MAX >> (8 * (7 - y1))) & (u64::MAX << (8 * y0));
-                let mut bz = l[2] >> 3;
-                while bz <= h[2] >> 3 {
-                    *budget = budget.checked_sub(1)?;
-                    if let Some(bits) = self.brick(slot_of(bx, by, bz)) {
-                        let (z0, z1) = ((l[2] - bz * 8).max(0), (h[2] - bz * 8).min(7));
-                        // Bits z0..=z1 of every byte, then only the rows inside.
-                        let yz = rows & (((0xffu64 >> (7 - z1 + z0)) << z0) * 0x0101_0101_0101_0101);
-                        if bits[x0..=x1].iter().any(|w| w & yz != 0) {
-                            return Some(true);
-                        }
-                    }
-                    bz += 1;
+        // The bricks the box meets, and those it covers whole (every cell of a
+        // non-empty covered brick is in the box: one found).
+        let (b0, b1) = (l.map(|v| v >> 3), h.map(|v| v >> 3));
+        let f0: [i64; 3] = std::array::from_fn(|a| b0[a] + i64::from(l[a] & 7 != 0));
+        let f1: [i64; 3] = std::array::from_fn(|a| b1[a] - i64::from(h[a] & 7 != 7));
+        let met = rows_and_columns(b0[1], b1[1], b0[2], b1[2]);
+        let covered = if f0[1] <= f1[1] && f0[2] <= f1[2] { rows_and_columns(f0[1], f1[1], f0[2], f1[2]) } else { 0 };
+        for bx in b0[0]..=b1[0] {
+            *budget = budget.checked_sub(1)?;
+            let mut partial = self.present[bx as usize] & met;
+            if (f0[0]..=f1[0]).contains(&bx) {
+                if partial & covered != 0 {
+                    return Some(true);
                 }
-                by += 1;
+                partial &= !covered;
             }
-            bx += 1;
+            let (x0, x1) = ((l[0] - bx * 8).max(0) as usize, (h[0] - bx * 8).min(7) as usize);
+            while partial != 0 {
+                *budget = budget.checked_sub(1)?;
+                let bit = i64::from(partial.trailing_zeros());
+                partial &= partial - 1;
+                let (by, bz) = (bit >> 3, bit & 7);
+                let Some(bits) = self.brick(slot_of(bx, by, bz)) else { continue };
+                let (y0, y1) = ((l[1] - by * 8).max(0), (h[1] - by * 8).min(7));
+                let (z0, z1) = ((l[2] - bz * 8).max(0), (h[2] - bz * 8).min(7));
+                let yz = rows_and_columns(y0, y1, z0, z1);
+                if bits[x0..=x1].iter().any(|w| w & yz != 0) {
+                    return Some(true);
+                }
+            }
         }
         Some(false)
     }
@@ -279,12 +300,14 @@ impl Tree {
     }
 
     /// Whether an occupied cell lies in the cells `lo..=hi`: `Some(false)` proven
-    /// empty, `Some(true)` found, `None` when that would take more than `budget`
-    /// node and brick lookups.
+    /// empty, `Some(true)` found, `None` when the box spans more than `budget`
+    /// bricks or the test would take more than `budget` node lookups, brick words
+    /// and bricks looked into.
     pub(super) fn any_in_box(&self, lo: CellIndex, hi: CellIndex, mut budget: u32) -> Option<bool> {
-        // Give up before any work when the box's bricks alone exceed the budget.
-        let bricks = (0..3).try_fold(1u64, |n, a| n.checked_mul(((hi[a] >> 3) - (lo[a] >> 3) + 1).max(0) as u64));
-        if bricks.is_none_or(|b| b > u64::from(budget)) {
+        // Give up before any work when the box's nodes alone exceed the budget.
+        let nodes = (0..3)
+            .try_fold(1u64, |n, a| n.checked_mul(((hi[a] >> NODE_SHIFT) - (lo[a] >> NODE_SHIFT) + 1).max(0) as u64));
+        if nodes.is_none_or(|b| b > u64::from(budget)) {
             return None;
         }
         // Plain loops over inclusive bounds: this runs for most candidates (the
