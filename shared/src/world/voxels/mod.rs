@@ -597,6 +597,47 @@ mod tests {
         assert!(empty > 500 && full > 100, "{empty} empty, {full} full");
     }
 
+    /// The same on dense blocks and boxes across several 64³ nodes, where the test
+    /// goes by the nodes' maps of non-empty bricks (whole bricks inside the box,
+    /// bricks on its faces), before and after half the cells (and whole bricks) are
+    /// cleared.
+    #[test]
+    fn box_queries_agree_with_every_cell_on_dense_blocks() {
+        let mut rng = Lcg(23);
+        let mut cells: Vec<CellIndex> = Vec::new();
+        for x in -70..90 {
+            for y in -20..30 {
+                for z in 0..12 {
+                    // Dense around x = 0 and x = 64 (two nodes), sparse elsewhere.
+                    let p = if (x as i64).rem_euclid(64) < 12 { 0.5 } else { 0.002 };
+                    if rng.next() < p {
+                        cells.push([x, y, z]);
+                    }
+                }
+            }
+        }
+        // Half the cells, and every cell of a slab: whole bricks become empty.
+        let cleared: Vec<CellIndex> =
+            cells.iter().copied().filter(|c| (0..12).contains(&c[0]) && c[1] < 8 || rng.next() < 0.5).collect();
+        let full_grid = VoxelGrid::new(0.1, Point3::origin(), cells.iter().copied()).unwrap();
+        let half_grid = full_grid.with_cells(&cleared, false).unwrap();
+        let half: Vec<CellIndex> = cells.iter().copied().filter(|c| !cleared.contains(c)).collect();
+        for (grid, cells) in [(&full_grid, &cells), (&half_grid, &half)] {
+            let (mut found_yes, mut found_no) = (0, 0);
+            for _ in 0..3000 {
+                let lo =
+                    [(rng.next() * 180.0) as i64 - 80, (rng.next() * 60.0) as i64 - 25, (rng.next() * 14.0) as i64 - 1];
+                let size = [(rng.next() * 140.0) as i64, (rng.next() * 30.0) as i64, (rng.next() * 10.0) as i64];
+                let hi = [lo[0] + size[0], lo[1] + size[1], lo[2] + size[2]];
+                let brute = cells.iter().any(|c| (0..3).all(|a| lo[a] <= c[a] && c[a] <= hi[a]));
+                let found = grid.tree.any_in_box(lo, hi, 100_000).expect("within budget");
+                assert_eq!(found, brute, "{lo:?}..={hi:?}");
+                if found { found_yes += 1 } else { found_no += 1 }
+            }
+            assert!(found_yes > 300 && found_no > 300, "{found_yes} found, {found_no} empty");
+        }
+    }
+
     #[test]
     fn along_a_face_touches() {
         let grid = VoxelGrid::new(1.0, Point3::origin(), [[2, 0, 0]]).unwrap();
