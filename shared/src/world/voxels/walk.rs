@@ -229,7 +229,7 @@ impl<'a> Walk<'a> {
             let exit = if inside { tb.max(t) } else { t };
             let end = exit.min(t1).min(*best);
             // The cells around that part of the segment, when few, settle it at once.
-            if self.part_is_clear(t, end) {
+            if L >= 2 && self.part_is_clear(t, end) {
                 continue;
             }
             match L {
