@@ -327,13 +327,8 @@ pub fn in_process(workload: Workload, set: &RequestSet, duration: Duration) -> R
         match workload {
             Workload::Dyfos => {
                 let Some(model) = &models[i] else { return Err("unsupported_model".into()) };
-                let control = SearchControl {
-                    seed: request.seed,
-                    budget: request.budget,
-                    deadline: None,
-                    threads: 1,
-                    abandon: None,
-                };
+                let control =
+                    SearchControl { budget: request.budget, threads: 1, ..SearchControl::seeded(request.seed) };
                 solve(world, &request.belief, &request.params, model, request.algorithm, &control)
                     .map(|a| Some(a.micros))
                     .map_err(|_| "no_feasible_pose".into())

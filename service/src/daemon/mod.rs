@@ -274,6 +274,9 @@ pub(crate) struct Shared {
     pub(crate) reply: Notifier<Ipc>,
     pub(crate) stats: Mutex<stats::Stats>,
     pub(crate) threads: usize,
+    /// Worker threads: `threads`, and as many spares with a fair queue (they run
+    /// queries on the cores of held searches, see `rendezvous::Queue`).
+    pub(crate) workers: usize,
     /// One per worker: its running query, watched by the IPC thread.
     pub(crate) watches: Box<[rendezvous::Watch]>,
     /// Weights of the learned SDSMM, if `--model` was given.
@@ -434,13 +437,15 @@ impl Daemon {
 
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = if config.workers == 0 { cores } else { config.workers }.max(2);
+        let workers = if config.fair_queue { 2 * threads } else { threads };
         let shared = Arc::new(Shared {
-            queue: Mutex::new(rendezvous::Queue::new(threads, config.fair_queue)),
+            queue: Mutex::new(rendezvous::Queue::new(threads, workers, config.fair_queue)),
             work: Condvar::new(),
             reply,
             stats: Mutex::new(stats::Stats::new()),
             threads,
-            watches: (0..threads).map(|_| rendezvous::Watch::new()).collect(),
+            workers,
+            watches: (0..workers).map(|_| rendezvous::Watch::new()).collect(),
             learned,
         });
         // The IPC thread is this one: try real-time once, then poll-ready (normal)
@@ -461,7 +466,7 @@ impl Daemon {
             worker_nice,
             if config.fair_queue { "fairly across clients" } else { "first come, first served" }
         );
-        let workers = (0..threads)
+        let workers = (0..workers)
             .map(|i| {
                 let shared = Arc::clone(&shared);
                 std::thread::Builder::new()
@@ -631,7 +636,7 @@ impl Daemon {
         if window.is_zero() || self.ipc_scheduling == IpcScheduling::Off {
             return window;
         }
-        if self.shared.queue.lock().map_or(0, |q| q.running()) >= self.shared.threads || self.cores.busy() {
+        if self.shared.queue.lock().map_or(0, |q| q.active()) >= self.shared.threads || self.cores.busy() {
             return Duration::ZERO;
         }
         self.priority.lower();

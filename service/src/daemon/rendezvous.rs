@@ -2,7 +2,7 @@
 
 use super::map::{check_version, guarded, invalid_delta, unknown_map};
 use super::{Daemon, Ipc, Shared};
-use crate::search::SearchControl;
+use crate::search::{Checkpoint, SearchControl};
 use crate::{SearchError, solve};
 use dyfos_shared::answer::{Algorithm, StopReason};
 use dyfos_shared::params::ModelKind;
@@ -15,7 +15,7 @@ use iceoryx2::active_request::ActiveRequest;
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 use tracing::{debug, error, info, trace};
 
 type RendezvousActive = ActiveRequest<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
@@ -43,11 +43,14 @@ type ClientKey = u128;
 pub(crate) struct Watch {
     running: Mutex<Option<(u64, RendezvousActive)>>,
     abandon: AtomicBool,
+    /// Raised (under the queue's lock) to ask the running search to hand its core
+    /// to a query of a client with none running; see [`Queue::to_hold`].
+    hold: AtomicBool,
 }
 
 impl Watch {
     pub(crate) fn new() -> Self {
-        Watch { running: Mutex::new(None), abandon: AtomicBool::new(false) }
+        Watch { running: Mutex::new(None), abandon: AtomicBool::new(false), hold: AtomicBool::new(false) }
     }
 
     /// Lends `active` to the IPC thread's watch, with the flag lowered.
@@ -82,30 +85,120 @@ impl Watch {
 /// class, a fair queue gives a free worker the oldest query of the client with the
 /// fewest searches running (so a client with many queries in flight takes its
 /// turn with the others); a FIFO one, the oldest query.
+///
+/// A fair queue also does not make a client wait for another's searches to end:
+/// when every core searches and a query comes from a client with none running, one
+/// `dyfos`-class search of the client with the most running is held at its next
+/// checkpoint (within 64 candidates), and a spare worker runs the new query on its
+/// core. Held searches go on, oldest first, as cores free up. At most `cores`
+/// searches run at a time; the spares only ever stand in for held ones.
 pub(crate) struct Queue {
     light: VecDeque<Job>,
     heavy: VecDeque<Job>,
+    /// Taken and not finished, held ones included.
     running: usize,
     running_heavy: usize,
     heavy_limit: usize,
+    /// Searches that may run at once: one per core.
+    cores: usize,
+    /// Running and not held.
+    active: usize,
+    held: usize,
     closed: bool,
     fair: bool,
     /// Clients with searches running and how many each: at most one entry per
     /// worker, allocated once.
     running_by: Vec<(ClientKey, usize)>,
+    /// What each worker runs: its client, and whether it is heavy or held (or
+    /// asked to be).
+    on_worker: Vec<Option<OnWorker>>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct OnWorker {
+    client: ClientKey,
+    heavy: bool,
+    held: bool,
 }
 
 impl Queue {
-    pub(crate) fn new(threads: usize, fair: bool) -> Self {
+    /// For `cores` searches at a time, on `workers` worker threads (more than
+    /// `cores` only for a fair queue: the spares).
+    pub(crate) fn new(cores: usize, workers: usize, fair: bool) -> Self {
         Queue {
             light: VecDeque::new(),
             heavy: VecDeque::new(),
             running: 0,
             running_heavy: 0,
-            heavy_limit: threads.saturating_sub(1).max(1),
+            heavy_limit: cores.saturating_sub(1).max(1),
+            cores,
+            active: 0,
+            held: 0,
             closed: false,
             fair,
-            running_by: Vec::with_capacity(threads),
+            running_by: Vec::with_capacity(workers),
+            on_worker: vec![None; workers],
+        }
+    }
+
+    /// Searches running and not held.
+    pub(crate) fn active(&self) -> usize {
+        self.active
+    }
+
+    /// Searches `client` has running (held ones included).
+    fn running_of(&self, client: ClientKey) -> usize {
+        self.running_by.iter().find(|(c, _)| *c == client).map_or(0, |(_, n)| *n)
+    }
+
+    /// Whether a light query waits whose client has no search running: it goes
+    /// before held searches.
+    fn starved(&self) -> bool {
+        self.fair && self.light.iter().any(|j| self.running_of(j.client) == 0)
+    }
+
+    /// The worker whose search should be held for a starved query, if every core
+    /// searches: a light search of the client with the most running (at least 2),
+    /// not held yet. Marks it asked.
+    pub(crate) fn to_hold(&mut self) -> Option<usize> {
+        if self.active < self.cores || !self.starved() {
+            return None;
+        }
+        let asked = self.on_worker.iter().filter(|w| w.is_some_and(|w| w.held)).count();
+        if asked >= self.on_worker.len() - self.cores {
+            return None; // no spare worker left to run the starved query
+        }
+        let (worker, _) = self
+            .on_worker
+            .iter()
+            .enumerate()
+            .filter_map(|(i, w)| w.filter(|w| !w.heavy && !w.held).map(|w| (i, self.running_of(w.client))))
+            .filter(|(_, n)| *n >= 2)
+            .max_by_key(|(i, n)| (*n, std::cmp::Reverse(*i)))?;
+        if let Some(w) = self.on_worker[worker].as_mut() {
+            w.held = true;
+        }
+        Some(worker)
+    }
+
+    /// The search on `worker` stops at its checkpoint: its core is free.
+    fn hold(&mut self) {
+        self.active -= 1;
+        self.held += 1;
+    }
+
+    /// Whether a held search may go on: a core is free and no starved query is
+    /// waiting for it.
+    fn may_go_on(&self) -> bool {
+        self.active < self.cores && !self.starved()
+    }
+
+    /// The held search on `worker` goes on.
+    fn go_on(&mut self, worker: usize) {
+        self.active += 1;
+        self.held -= 1;
+        if let Some(w) = self.on_worker[worker].as_mut() {
+            w.held = false;
         }
     }
 
@@ -140,23 +233,29 @@ impl Queue {
         }
     }
 
-    /// The next job a free worker may take, and whether it is heavy.
-    fn take(&mut self) -> Option<(Job, bool)> {
-        let (job, heavy) = if !self.light.is_empty() {
+    /// The next job free worker `worker` may take, and whether it is heavy.
+    fn take(&mut self, worker: usize) -> Option<(Job, bool)> {
+        if self.active >= self.cores {
+            return None;
+        }
+        // Held searches go on before new queries, except a starved one's.
+        let (job, heavy) = if !self.light.is_empty() && (self.held == 0 || self.starved()) {
             let i = self.next_of(false);
             (self.light.remove(i)?, false)
-        } else if self.running_heavy < self.heavy_limit && !self.heavy.is_empty() {
+        } else if self.held == 0 && self.running_heavy < self.heavy_limit && !self.heavy.is_empty() {
             let i = self.next_of(true);
             (self.heavy.remove(i)?, true)
         } else {
             return None;
         };
         self.running += 1;
+        self.active += 1;
         self.running_heavy += usize::from(heavy);
         match self.running_by.iter_mut().find(|(c, _)| *c == job.client) {
             Some((_, n)) => *n += 1,
             None => self.running_by.push((job.client, 1)),
         }
+        self.on_worker[worker] = Some(OnWorker { client: job.client, heavy, held: false });
         Some((job, heavy))
     }
 
@@ -169,8 +268,10 @@ impl Queue {
         fair_pick(queue.iter().map(|j| j.client), &self.running_by)
     }
 
-    fn finish(&mut self, heavy: bool, client: ClientKey) {
+    fn finish(&mut self, worker: usize, heavy: bool, client: ClientKey) {
         self.running -= 1;
+        self.active -= 1;
+        self.on_worker[worker] = None;
         self.running_heavy -= usize::from(heavy);
         if let Some(i) = self.running_by.iter().position(|(c, _)| *c == client) {
             self.running_by[i].1 -= 1;
@@ -216,7 +317,7 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
         let (job, heavy) = {
             let mut q = lock(&shared.queue);
             loop {
-                if let Some(taken) = q.take() {
+                if let Some(taken) = q.take(index) {
                     break taken;
                 }
                 if q.closed {
@@ -229,12 +330,48 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
         // queries in flight) with it; `run` answers `internal_error` for a panic in
         // the search itself, this catches the rest.
         let client = job.client;
-        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(shared, watch, job))).is_err() {
+        let hold = Holdable { shared, worker: index };
+        let checkpoint = (!heavy && shared.workers > shared.threads).then_some(&hold as &dyn Checkpoint);
+        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(shared, watch, job, checkpoint))).is_err() {
             error!("a search panicked; its query was dropped");
         }
-        lock(&shared.queue).finish(heavy, client);
-        // A heavy job may have become runnable.
+        lock(&shared.queue).finish(index, heavy, client);
+        // A heavy job, a held search or a query may have become runnable.
         shared.work.notify_all();
+    }
+}
+
+/// The checkpoint of a search on worker `worker`: holds it while the IPC thread
+/// asked it to give its core to a starved query (see [`Queue`]).
+struct Holdable<'s> {
+    shared: &'s Shared,
+    worker: usize,
+}
+
+impl std::fmt::Debug for Holdable<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Holdable").field("worker", &self.worker).finish_non_exhaustive()
+    }
+}
+
+impl Checkpoint for Holdable<'_> {
+    fn checkpoint(&self) {
+        let watch = &self.shared.watches[self.worker];
+        if !watch.hold.load(Ordering::Relaxed) {
+            return;
+        }
+        let mut q = lock(&self.shared.queue);
+        watch.hold.store(false, Ordering::Relaxed);
+        q.hold();
+        self.shared.work.notify_all();
+        let held = Instant::now();
+        // An abandoned search goes on at once, to see the flag and stop.
+        while !q.may_go_on() && !watch.abandon.load(Ordering::Relaxed) {
+            q = self.shared.work.wait_timeout(q, Duration::from_millis(10)).map_or_else(|p| p.into_inner().0, |r| r.0);
+        }
+        q.go_on(self.worker);
+        drop(q);
+        trace!(worker = self.worker, micros = held.elapsed().as_micros() as u64, "held search goes on");
     }
 }
 
@@ -242,7 +379,7 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
 /// left before the search started is skipped, one that leaves during it (seen by the
 /// IPC thread through `watch`) abandons the search. Neither gets a reply, as nobody
 /// is there to receive it; an abandoned search is counted in the stats.
-fn run(shared: &Shared, watch: &Watch, job: Job) {
+fn run(shared: &Shared, watch: &Watch, job: Job, checkpoint: Option<&dyn Checkpoint>) {
     let Job { active, request, world, received, reply_to, request_id, client: _ } = job;
     let deadline = request.deadline.map(|d| received + d);
     if !active.is_connected() {
@@ -275,6 +412,7 @@ fn run(shared: &Shared, watch: &Watch, job: Job) {
                 deadline,
                 threads: shared.threads,
                 abandon: Some(&watch.abandon),
+                checkpoint,
             };
             Ok(solve(&world, &request.belief, &request.params, &model, request.algorithm, &control))
         });
@@ -406,16 +544,15 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
         }
         Ok(Accepted::Queued(request, world)) => {
             let client = active.origin().value();
-            lock(&daemon.shared.queue).push(Job {
-                active,
-                request: *request,
-                world,
-                received,
-                reply_to,
-                request_id,
-                client,
-            });
-            daemon.shared.work.notify_one();
+            let mut q = lock(&daemon.shared.queue);
+            q.push(Job { active, request: *request, world, received, reply_to, request_id, client });
+            if let Some(worker) = q.to_hold() {
+                daemon.shared.watches[worker].hold.store(true, Ordering::Relaxed);
+                trace!(request_id, worker, "every core searches: holding a search of the busiest client");
+            }
+            drop(q);
+            // Idle and held workers wait on the same condition.
+            daemon.shared.work.notify_all();
         }
     }
 }
@@ -426,18 +563,21 @@ mod tests {
 
     #[test]
     fn heavy_jobs_leave_one_worker_free() {
-        let mut q = Queue::new(2, true);
+        let mut q = Queue::new(2, 4, true);
         assert_eq!(q.heavy_limit, 1);
-        assert_eq!(Queue::new(8, false).heavy_limit, 7);
+        assert_eq!(Queue::new(8, 8, false).heavy_limit, 7);
         assert_eq!(q.pending(), 0);
         q.running_heavy = 1;
         q.running = 1;
+        q.active = 1;
         // No heavy job can start while one runs on a 2-worker pool.
-        assert!(q.take().is_none());
+        assert!(q.take(1).is_none());
         q.running_by.clear();
         q.running_by.push((7, 1));
-        q.finish(true, 7);
-        assert_eq!((q.running, q.running_heavy, q.running_by.len()), (0, 0, 0));
+        q.on_worker[0] = Some(OnWorker { client: 7, heavy: true, held: false });
+        q.finish(0, true, 7);
+        assert_eq!((q.running, q.active, q.running_heavy, q.running_by.len()), (0, 0, 0, 0));
+        assert!(q.on_worker[0].is_none());
     }
 
     #[test]

@@ -50,13 +50,24 @@ pub struct SearchControl<'c> {
     /// thread looks with the deadline, every [`Evaluator::CLOCK_EVERY`] evaluations.
     /// A flag never raised changes nothing, bit for bit.
     pub abandon: Option<&'c AtomicBool>,
+    /// Called at the same looks as `abandon`, by every search thread: the caller
+    /// may hold the search there (the daemon does, to hand its core to another
+    /// client's query). Holding it changes nothing but the time, bit for bit.
+    pub checkpoint: Option<&'c dyn Checkpoint>,
+}
+
+/// Where a running search can be held: [`Checkpoint::checkpoint`] is called every
+/// [`Evaluator::CLOCK_EVERY`] evaluations and returns when the search may go on.
+pub trait Checkpoint: Sync + std::fmt::Debug {
+    /// Returns at once, or when the search may go on.
+    fn checkpoint(&self);
 }
 
 impl SearchControl<'static> {
     /// Seed `seed`, no budget, no deadline, all cores, nobody to abandon it.
     pub fn seeded(seed: u64) -> Self {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        SearchControl { seed, budget: None, deadline: None, threads, abandon: None }
+        SearchControl { seed, budget: None, deadline: None, threads, abandon: None, checkpoint: None }
     }
 }
 
@@ -134,6 +145,7 @@ pub struct Evaluator<'l, 'a> {
     budget: u64,
     deadline: Option<Instant>,
     abandon: Option<&'l AtomicBool>,
+    checkpoint: Option<&'l dyn Checkpoint>,
     stopped: Option<StopReason>,
     best: Option<Found>,
 }
@@ -150,6 +162,7 @@ impl<'l, 'a> Evaluator<'l, 'a> {
             budget: control.budget.unwrap_or(u64::MAX),
             deadline: control.deadline,
             abandon: control.abandon,
+            checkpoint: control.checkpoint,
             stopped: None,
             best: None,
         }
@@ -168,6 +181,9 @@ impl<'l, 'a> Evaluator<'l, 'a> {
             return None;
         }
         if self.stats.total.is_multiple_of(Self::CLOCK_EVERY) {
+            if let Some(c) = self.checkpoint {
+                c.checkpoint();
+            }
             // Relaxed: the flag orders nothing else; a raise is seen at a later look.
             if self.abandon.is_some_and(|a| a.load(Ordering::Relaxed)) {
                 self.stopped = Some(StopReason::Abandoned);

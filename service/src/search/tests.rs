@@ -217,3 +217,41 @@ fn an_abandon_flag_never_raised_changes_nothing() {
         }
     }
 }
+
+/// A checkpoint that holds the search a while, at every look: called at every
+/// look, by every thread, and the answer is the same bit for bit.
+#[derive(Debug, Default)]
+struct SlowCheckpoint {
+    calls: std::sync::atomic::AtomicU64,
+}
+
+impl super::Checkpoint for SlowCheckpoint {
+    fn checkpoint(&self) {
+        self.calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        std::thread::sleep(std::time::Duration::from_micros(20));
+    }
+}
+
+#[test]
+fn a_search_held_at_its_checkpoints_gives_the_same_answer() {
+    let s = example();
+    let model = NoiseModel::from_params(&s.params).unwrap();
+    let lupp = Lupp::new(&s.world, &s.belief, &s.params, &model);
+    for algo in algorithms() {
+        for threads in [1, 3] {
+            let held = SlowCheckpoint::default();
+            let plain = SearchControl { threads, budget: Some(3000), ..SearchControl::seeded(4) };
+            let watched = SearchControl { checkpoint: Some(&held), ..plain };
+            let (a, b) = (algo.search(&lupp, &plain), algo.search(&lupp, &watched));
+            let bits = |o: &SearchOutcome| o.best.map(|b| (b.x.to_array().map(f64::to_bits), b.cost.to_bits()));
+            assert_eq!((bits(&a), a.stats, a.stop), (bits(&b), b.stats, b.stop), "{algo:?}, {threads} threads");
+            // One look every CLOCK_EVERY evaluations of each thread, from the first.
+            let calls = held.calls.load(std::sync::atomic::Ordering::Relaxed);
+            assert!(
+                calls >= b.stats.total / Evaluator::CLOCK_EVERY,
+                "{algo:?}: {calls} looks for {} evaluations",
+                b.stats.total
+            );
+        }
+    }
+}
