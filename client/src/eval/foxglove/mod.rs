@@ -121,9 +121,10 @@ enum Topic {
     Ape,
 }
 
-/// The path topics carry the whole path so far: every this many samples, and at
-/// each waypoint and the last sample (the file grows with samples² / this).
-const PATH_EVERY: usize = 8;
+/// The path topics carry the whole path so far: every this many samples (10 s of
+/// simulated time), at each arrival at a waypoint and at the last sample. The file
+/// grows with samples² / this: the built-in mission's file is about 1.8 MB.
+const PATH_EVERY: usize = 40;
 /// Most voxels drawn as cubes (each is a scene primitive).
 pub const MAX_VOXEL_CUBES: usize = 20_000;
 /// The covariance ellipse holds 95 % of the position probability: √χ²₂(0.95).
@@ -452,13 +453,16 @@ impl McapMission {
         truth.sort_by_key(|t| t.sample);
         truth.dedup_by_key(|t| t.sample);
         let mut path = Vec::with_capacity(truth.len());
+        let mut driving = true;
         for (i, t) in truth.iter().enumerate() {
             let ns = nanos(t.sim_time);
             let [x, y, theta] = t.pose;
             out.push((Topic::Tf, ns, scene::frame_transform(ns, "map", "rover", [x, y, 0.0], theta, 0.0)));
             out.push((Topic::RoverPose, ns, scene::pose_in_map(ns, [x, y, 0.0], theta)));
             path.push(t.pose);
-            if i % PATH_EVERY == 0 || t.phase != Phase::Driving || i + 1 == truth.len() {
+            let arrived = driving && t.phase != Phase::Driving;
+            driving = t.phase == Phase::Driving;
+            if i % PATH_EVERY == 0 || arrived || i + 1 == truth.len() {
                 out.push((Topic::RoverPath, ns, scene::path_in_map(ns, &path)));
             }
         }
@@ -466,13 +470,16 @@ impl McapMission {
         estimates.sort_by_key(|e| e.sample);
         estimates.dedup_by_key(|e| e.sample);
         let mut path = Vec::with_capacity(estimates.len());
+        let mut driving = true;
         for (i, e) in estimates.iter().enumerate() {
             let ns = nanos(e.sim_time);
             let m = e.belief.mean;
             out.push((Topic::Tf, ns, scene::frame_transform(ns, "map", "rover_estimate", [m.x, m.y, 0.0], m.z, 0.0)));
             out.push((Topic::EstimatePose, ns, scene::pose_in_map(ns, [m.x, m.y, 0.0], m.z)));
             path.push([m.x, m.y, m.z]);
-            if i % PATH_EVERY == 0 || e.phase != Phase::Driving || i + 1 == estimates.len() {
+            let arrived = driving && e.phase != Phase::Driving;
+            driving = e.phase == Phase::Driving;
+            if i % PATH_EVERY == 0 || arrived || i + 1 == estimates.len() {
                 out.push((Topic::EstimatePath, ns, scene::path_in_map(ns, &path)));
             }
             let c = e.belief.cov.to_rows();
@@ -645,8 +652,8 @@ mod tests {
         assert_eq!(count(Topic::Ape), 20);
         assert_eq!(count(Topic::Request), 1, "a repeated request is recorded once");
         assert_eq!(count(Topic::Measurement), 2);
-        // Path: samples 0 and 8 (every 8th), 9 (at the waypoint), 16, 19 (at the waypoint, last).
-        assert_eq!(count(Topic::RoverPath), 5);
+        // Path: sample 0 (every 40th), 9 and 19 (arrivals; 19 is the last).
+        assert_eq!(count(Topic::RoverPath), 3);
         let last_path = messages.iter().rev().find(|(t, _, _)| *t == Topic::RoverPath).unwrap();
         assert_eq!(last_path.2["poses"].as_array().unwrap().len(), 20);
         // Same record, same bytes.
