@@ -16,7 +16,7 @@
 
 use crate::hosts::{Hosts, ROVER, VIEWER};
 use crate::{Sandbox, bin, wait_for};
-use dyfos_client::eval::Recorder;
+use dyfos_client::eval::{MissionTrace, Recorder};
 use dyfos_client::mission::Mission;
 use dyfos_client::mission::log::read_events;
 use dyfos_client::mission::topics::TopicsConfig;
@@ -27,6 +27,7 @@ use dyfos_shared::posterior::Belief;
 use dyfos_shared::world::{Bounds, Obstacle, Sun, VerticalCylinder, World};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
 
 /// A 16 m × 16 m world with 6 trees and 4 waypoints over 10 m. The odometry is
 /// noisier than the built-in mission's, so that a rover left to dead reckoning
@@ -256,6 +257,20 @@ impl Robot {
 impl Drop for Robot {
     fn drop(&mut self) {
         self.kill9();
+    }
+}
+
+/// Records the mission until the rover exits (at most [`crate::PATIENCE`]);
+/// returns its status and the trace.
+pub fn record_until_exit(mut recorder: Recorder, rover: &mut Robot) -> (ExitStatus, MissionTrace) {
+    let start = Instant::now();
+    loop {
+        recorder.poll();
+        if let Some(status) = rover.try_exit() {
+            return (status, recorder.finish());
+        }
+        assert!(start.elapsed() < crate::PATIENCE, "the rover did not finish:\n{}", rover.log());
+        recorder.wait(Duration::from_millis(20));
     }
 }
 

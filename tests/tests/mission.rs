@@ -3,26 +3,12 @@
 //! what the other side sent, measurements beat dead reckoning, and a viewer killed
 //! mid-run leaves the rover finishing on dead reckoning.
 
-use dyfos_client::eval::{MissionTrace, Recorder};
 use dyfos_client::mission::Mission;
 use dyfos_shared::wire::mission::Observation;
-use dyfos_tests::mission::{MissionFiles, Robot, small_mission, steps_of};
+use dyfos_tests::mission::{MissionFiles, record_until_exit, small_mission, steps_of};
 use dyfos_tests::{PATIENCE, Sandbox, bin};
-use std::process::{Command, ExitStatus};
+use std::process::Command;
 use std::time::{Duration, Instant};
-
-/// Records the mission until the rover exits; returns its status and the trace.
-fn record_until_exit(mut recorder: Recorder, rover: &mut Robot) -> (ExitStatus, MissionTrace) {
-    let start = Instant::now();
-    loop {
-        recorder.poll();
-        if let Some(status) = rover.try_exit() {
-            return (status, recorder.finish());
-        }
-        assert!(start.elapsed() < PATIENCE, "the rover did not finish:\n{}", rover.log());
-        recorder.wait(Duration::from_millis(20));
-    }
-}
 
 #[test]
 fn rover_reaches_the_goal_and_every_exchange_happens_in_order() {
@@ -224,6 +210,22 @@ fn demo_prints_the_ape_table_and_draws_each_run() {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["runs"].as_array().unwrap().len(), 3);
+    // One MCAP file per run (tests/tests/mission_mcap.rs checks their content):
+    // the rover's samples from the recorded trace, the answers from the viewer's log.
+    for (arm, run) in ["dyfos", "center", "dead-reckoning"].iter().zip(summary["runs"].as_array().unwrap()) {
+        let bytes = std::fs::read(out_dir.join(format!("mission-{arm}-s1.mcap"))).unwrap();
+        let file = mcap::Summary::read(&bytes).unwrap().expect("a summary");
+        let stats = file.stats.expect("statistics");
+        let count = |topic: &str| {
+            let (id, _) = file.channels.iter().find(|(_, c)| c.topic == topic).unwrap_or_else(|| panic!("{topic}"));
+            stats.channel_message_counts.get(id).copied().unwrap_or(0)
+        };
+        let rendezvous = if *arm == "dead-reckoning" { 0 } else { small_mission().waypoints.len() as u64 };
+        assert_eq!(count("/dyfos/rendezvous/answer"), rendezvous, "{arm}");
+        assert_eq!(count("/dyfos/rendezvous/request"), rendezvous, "{arm}");
+        assert_eq!(count("/dyfos/rendezvous/measurement"), run["rendezvous"].as_u64().unwrap(), "{arm}");
+        assert!(count("/rover/pose") > 20 && count("/dyfos/ape") == count("/rover/pose"), "{arm}");
+    }
     let _ = std::fs::remove_dir_all(&out_dir);
 }
 

@@ -53,6 +53,9 @@ struct Cli {
     /// Write every event as a JSON line to this file.
     #[arg(long)]
     events: Option<PathBuf>,
+    /// Write the mission as an MCAP file here at exit (its true and estimated poses, rendezvous, measurements and APE), for Foxglove.
+    #[arg(long)]
+    mcap: Option<PathBuf>,
 }
 
 fn seconds(name: &str, v: f64) -> anyhow::Result<Duration> {
@@ -73,6 +76,7 @@ fn config(cli: &Cli) -> anyhow::Result<RoverConfig> {
         presence_timeout: seconds("presence-timeout", cli.presence_timeout)?,
         dead_reckoning: cli.dead_reckoning,
         events: cli.events.clone(),
+        mcap: cli.mcap.clone(),
         ..RoverConfig::new(topics, mission, cli.seed)
     })
 }

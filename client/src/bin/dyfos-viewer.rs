@@ -73,6 +73,9 @@ struct Cli {
     /// Write every event as a JSON line to this file.
     #[arg(long)]
     events: Option<PathBuf>,
+    /// Write the mission as an MCAP file here at exit (the rendezvous beliefs, the daemon's answers, its measurements and poses), for Foxglove.
+    #[arg(long)]
+    mcap: Option<PathBuf>,
     /// Model file of the learned SDSMM (from `dyfos train`), for missions with
     /// `"model": "learned"`; give dyfosd the same file.
     #[arg(long)]
@@ -125,6 +128,7 @@ fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
         presence_timeout: seconds("presence-timeout", cli.presence_timeout)?,
         rover_timeout: seconds("rover-timeout", cli.rover_timeout)?,
         events: cli.events.clone(),
+        mcap: cli.mcap.clone(),
         ..ViewerConfig::new(client, topics, mission, cli.algo, cli.seed)
     })
 }

@@ -1,6 +1,7 @@
 //! Evaluation of a mission: record the ground truth and the rover's estimate from
 //! their topics, compute the absolute position error (APE, paper Table I) and draw
-//! the run (paper Fig. 5).
+//! the run (paper Fig. 5); keep it as an MCAP file Foxglove opens as is
+//! ([`McapMission`], module [`foxglove`]).
 //!
 //! The APE is taken over every recorded sample — the estimate and the truth with
 //! the same sample number, i.e. the same instant — as `|est_xy − true_xy|`, like
@@ -17,9 +18,11 @@
 //! assert_eq!(ape.max, 0.12);
 //! ```
 
+pub mod foxglove;
 mod recorder;
 mod svg;
 
+pub use foxglove::{AnswerRecord, McapMission, McapWriteError};
 pub use recorder::{MissionTrace, Recorder};
 pub use svg::render_svg;
 

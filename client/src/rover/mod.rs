@@ -27,6 +27,11 @@
 //! the simulated camera and the evaluation) and the robot half its estimate on
 //! `mission/<name>/estimate`, with matching sample numbers.
 //!
+//! With [`RoverConfig::mcap`] the rover keeps what it knows of the mission — its
+//! true and estimated poses, its rendezvous beliefs, the measurements it got (with
+//! the viewer's poses) and the APE — as an MCAP file for Foxglove
+//! ([`crate::eval::McapMission`]), written when it exits.
+//!
 //! ```no_run
 //! use dyfos_client::mission::{Mission, topics::TopicsConfig};
 //! use dyfos_client::rover::{RoverConfig, run_rover};
@@ -41,6 +46,7 @@
 pub mod controller;
 pub mod ekf;
 
+use crate::eval::{McapMission, McapWriteError};
 use crate::mission::Mission;
 use crate::mission::log::EventLog;
 use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
@@ -86,6 +92,9 @@ pub struct RoverConfig {
     pub sample_every: u32,
     /// JSON-lines event log.
     pub events: Option<PathBuf>,
+    /// MCAP file of the mission as the rover knows it, written at exit (also after
+    /// a failure, with what was recorded).
+    pub mcap: Option<PathBuf>,
     /// At the goal, how long to wait for the evaluation (estimate readers, if any)
     /// to acknowledge the last sample before exiting, wall time.
     pub linger: Duration,
@@ -107,6 +116,7 @@ impl RoverConfig {
             drive: DriveConfig::default(),
             sample_every: 5,
             events: None,
+            mcap: None,
             linger: Duration::from_secs(5),
         }
     }
@@ -140,6 +150,9 @@ pub enum RoverRunError {
         /// The step the rover was on.
         step: u32,
     },
+    /// The mission's MCAP file could not be written.
+    #[error(transparent)]
+    Mcap(#[from] McapWriteError),
 }
 
 /// What the mission came to, as the rover knows it.
@@ -189,6 +202,8 @@ struct Run<'a> {
     messages_sent: u32,
     /// Whether presence changes go to the event log (not after the finish).
     log_presence: bool,
+    /// The mission file being recorded, if asked for.
+    mcap: &'a mut Option<McapMission>,
 }
 
 /// Why a waypoint passed without a measurement.
@@ -205,6 +220,10 @@ impl Run<'_> {
             Estimate { sample: self.sample, step, phase, updated, sim_time: self.sim_time, belief: self.ekf.belief() };
         self.ports.truth.send(TrueStateMsg::from(&truth))?;
         self.ports.estimate.send(EstimateMsg::from(&estimate))?;
+        if let Some(mcap) = self.mcap.as_mut() {
+            mcap.record_truth(&truth);
+            mcap.record_estimate(&estimate);
+        }
         self.sample += 1;
         Ok(())
     }
@@ -330,8 +349,26 @@ fn true_start(mission: &Mission, seed: u64) -> [f64; 3] {
     [s.x, s.y, dyfos_shared::math::wrap_angle(s.z)]
 }
 
-/// Runs the mission to the goal. `stop` is polled (e.g. [`crate::shutdown::requested`]).
+/// Runs the mission to the goal, then writes [`RoverConfig::mcap`] if asked for.
+/// `stop` is polled (e.g. [`crate::shutdown::requested`]).
 pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<RoverReport, RoverRunError> {
+    let mut mcap = config.mcap.as_ref().map(|_| McapMission::new(&config.mission));
+    let result = drive(config, stop, &mut mcap);
+    if let (Some(path), Some(mcap)) = (&config.mcap, &mcap) {
+        match mcap.write(path) {
+            Ok(()) => tracing::info!("mission written to {}", path.display()),
+            Err(e) if result.is_ok() => return Err(e.into()),
+            Err(e) => tracing::error!("{e}"),
+        }
+    }
+    result
+}
+
+fn drive(
+    config: &RoverConfig,
+    stop: &impl Fn() -> bool,
+    mcap: &mut Option<McapMission>,
+) -> Result<RoverReport, RoverRunError> {
     let topics = Topics::open(&config.topics)?;
     let ports = Ports {
         viewer: Peer::open(&topics, VIEWER_PRESENCE_TOPIC, config.presence_timeout)?,
@@ -360,6 +397,7 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
         done: 0,
         messages_sent: 0,
         log_presence: true,
+        mcap,
         ports,
     };
 
@@ -411,6 +449,9 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
         if !config.dead_reckoning {
             let msg = RendezvousState::Rendezvous { step, sim_time: run.sim_time, belief: rendezvous };
             let readers = run.send_reliably(&msg)?;
+            if let Some(mcap) = run.mcap.as_mut() {
+                mcap.record_request(step, run.sim_time, &rendezvous);
+            }
             run.log.record(
                 "rendezvous_sent",
                 run.sim_time,
@@ -447,6 +488,9 @@ pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<Rover
         }
         run.clock.catch_up();
         run.sim_time = run.sim_time.max(run.clock.now());
+        if let (Ok(m), Some(mcap)) = (&outcome, run.mcap.as_mut()) {
+            mcap.record_measurement(m);
+        }
         let reason = match outcome {
             Ok(m) => match m.observation {
                 Observation::Observed { position, r } => match run.ekf.update(position, &r) {

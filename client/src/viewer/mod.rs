@@ -25,6 +25,10 @@
 //! When the daemon has no answer (no feasible pose, unreachable) the viewer says
 //! so at once, and the rover dead-reckons that step.
 //!
+//! With [`ViewerConfig::mcap`] the viewer keeps its side of the mission — the
+//! rendezvous beliefs, the daemon's answers, its measurements and poses — as an
+//! MCAP file for Foxglove ([`crate::eval::McapMission`]), written when it exits.
+//!
 //! ```no_run
 //! use dyfos_client::ClientConfig;
 //! use dyfos_client::mission::{Mission, topics::TopicsConfig};
@@ -38,6 +42,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+use crate::eval::{AnswerRecord, McapMission, McapWriteError};
 use crate::mission::Mission;
 use crate::mission::log::EventLog;
 use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
@@ -95,6 +100,9 @@ pub struct ViewerConfig {
     pub rover_timeout: Duration,
     /// JSON-lines event log.
     pub events: Option<PathBuf>,
+    /// MCAP file of the viewer's side of the mission, written at exit (also after
+    /// a failure, with what was recorded).
+    pub mcap: Option<PathBuf>,
     /// Weights of the `learned` SDSMM, for missions whose `params.model` is
     /// `learned` (the camera's noise; `dyfosd` needs the same file, its `--model`).
     pub learned: Option<Arc<Learned>>,
@@ -121,6 +129,7 @@ impl ViewerConfig {
             presence_timeout: Duration::from_secs(2),
             rover_timeout: Duration::from_secs(20),
             events: None,
+            mcap: None,
             learned: None,
         }
     }
@@ -168,6 +177,9 @@ pub enum ViewerRunError {
     /// SIGINT or SIGTERM arrived.
     #[error("stopped by a signal")]
     Stopped,
+    /// The mission's MCAP file could not be written.
+    #[error(transparent)]
+    Mcap(#[from] McapWriteError),
 }
 
 /// What the viewer did.
@@ -376,8 +388,26 @@ impl Viewer<'_> {
     }
 }
 
-/// Runs until the rover finishes (or goes quiet for `idle_timeout`).
+/// Runs until the rover finishes (or goes quiet for `idle_timeout`); then writes
+/// [`ViewerConfig::mcap`], if asked for.
 pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<ViewerReport, ViewerRunError> {
+    let mut mcap = config.mcap.as_ref().map(|_| McapMission::new(&config.mission));
+    let result = serve(config, stop, &mut mcap);
+    if let (Some(path), Some(mcap)) = (&config.mcap, &mcap) {
+        match mcap.write(path) {
+            Ok(()) => tracing::info!("mission written to {}", path.display()),
+            Err(e) if result.is_ok() => return Err(e.into()),
+            Err(e) => tracing::error!("{e}"),
+        }
+    }
+    result
+}
+
+fn serve(
+    config: &ViewerConfig,
+    stop: &impl Fn() -> bool,
+    mcap: &mut Option<McapMission>,
+) -> Result<ViewerReport, ViewerRunError> {
     let mission = &config.mission;
     let model = NoiseModel::from_params_and_weights(&mission.params, config.learned.as_ref())?;
     let client = Client::connect(&config.client)?;
@@ -470,7 +500,14 @@ pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<Vie
         }
         v.clock.catch_up();
         report.rendezvous += 1;
-        v.log.record("rendezvous_received", v.clock.now(), json!({"step": step, "mean": belief.mean.as_slice()}));
+        v.log.record(
+            "rendezvous_received",
+            v.clock.now(),
+            json!({"step": step, "mean": belief.mean.as_slice(), "cov": belief.cov.to_rows()}),
+        );
+        if let Some(mcap) = mcap.as_mut() {
+            mcap.record_request(step, v.clock.now(), &belief);
+        }
 
         let measurement_of = |observation, viewer, predicted_cost, v: &Viewer| Measurement {
             step,
@@ -496,13 +533,17 @@ pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<Vie
             }
             Ok(answer) => {
                 let target = (<[f64; 3]>::from(answer.viewer_position.coords), answer.viewer_yaw);
+                let record = AnswerRecord::new(step, v.clock.now(), &answer);
                 v.log.record(
                     "answer",
                     v.clock.now(),
                     json!({"step": step, "viewer_position": target.0, "viewer_yaw": target.1, "cost": answer.cost,
                            "R": answer.r, "evaluations": answer.evaluations.total, "micros": answer.micros,
-                           "map_version": answer.map_version}),
+                           "map_version": answer.map_version, "rendezvous_answer": record}),
                 );
+                if let Some(mcap) = mcap.as_mut() {
+                    mcap.record_answer(record);
+                }
                 if !v.fly(target, stop) {
                     return Err(ViewerRunError::Stopped);
                 }
@@ -531,6 +572,9 @@ pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<Vie
             }
             Observation::NotObserved(why) => (why.name(), None),
         };
+        if let Some(mcap) = mcap.as_mut() {
+            mcap.record_measurement(&m);
+        }
         let (pending, _) = Reliable::send(&v.measurement, MeasurementMsg::from(&m), step, AckKind::Measurement)?;
         v.pending = Some(pending);
         v.messages_sent += 1;

@@ -5,8 +5,10 @@
 //! mission with the same seeds, plus one rover without a viewer (dead reckoning)
 //! as the baseline. This process listens to the simulation's ground truth and the
 //! rover's estimate, prints the APE table of paper Table I and writes one SVG per
-//! algorithm in the style of paper Fig. 5. Every child is stopped on exit, on error
-//! and on Ctrl-C.
+//! algorithm in the style of paper Fig. 5, and one MCAP file per run for Foxglove
+//! (the recorded truth and estimates, plus the viewer's requests and the daemon's
+//! answers from its event log; see [`dyfos_client::eval::foxglove`]). Every child is
+//! stopped on exit, on error and on Ctrl-C.
 //!
 //! With `--hosts 2` each algorithm's rover runs on a second "host" (a network
 //! namespace with its own iceoryx2 domain, see [`crate::hosts`]) and the mission
@@ -16,8 +18,9 @@
 use crate::Failure;
 use crate::hosts::{ROVER_ENDPOINT, TwoHosts};
 use anyhow::{Context, anyhow, bail};
-use dyfos_client::eval::{ApeStats, MissionTrace, Recorder, mean_std, render_svg};
+use dyfos_client::eval::{ApeStats, McapMission, MissionTrace, Recorder, mean_std, render_svg};
 use dyfos_client::mission::Mission;
+use dyfos_client::mission::log::read_events;
 use dyfos_client::mission::topics::TopicsConfig;
 use dyfos_client::{Client, ClientConfig, shutdown};
 use dyfos_shared::answer::Algorithm;
@@ -47,7 +50,7 @@ pub struct DemoArgs {
     /// Simulated seconds per wall second; 0 runs as fast as the computer allows.
     #[arg(allow_hyphen_values = true, long, default_value_t = 20.0)]
     pub time_scale: f64,
-    /// Directory for the SVGs, a JSON summary and the processes' logs.
+    /// Directory for the SVGs, the MCAP files (one per run), a JSON summary and the processes' logs.
     #[arg(long, default_value = "dyfos-demo")]
     pub out: PathBuf,
     /// Skip the dead-reckoning baseline (a rover without a viewer).
@@ -182,6 +185,7 @@ struct RunResult {
 struct Demo<'a> {
     args: &'a DemoArgs,
     bins: Binaries,
+    mission: &'a Mission,
     prefix: String,
     logs: PathBuf,
     mission_arg: Option<PathBuf>,
@@ -312,6 +316,14 @@ impl Demo<'_> {
         }
         let trace = recorder.finish();
         let ape = trace.ape().ok_or_else(|| anyhow!("no samples were recorded for {name}"))?;
+        let mut mcap = McapMission::new(self.mission);
+        mcap.record_trace(&trace);
+        if arm != Arm::DeadReckoning {
+            let log = self.logs.join(format!("{name}-viewer.jsonl"));
+            let events = read_events(&log).with_context(|| format!("cannot read {}", log.display()))?;
+            mcap.record_viewer_events(&events);
+        }
+        mcap.write(&self.args.out.join(format!("mission-{name}.mcap")))?;
         let observed =
             trace.measurements.iter().filter(|m| matches!(m.observation, Observation::Observed { .. })).count();
         eprintln!(
@@ -466,6 +478,7 @@ fn run(args: &DemoArgs) -> Result<(), Failure> {
     let demo = Demo {
         args,
         bins,
+        mission: &mission,
         prefix,
         logs: logs.clone(),
         mission_arg: args.mission.as_ref().map(|p| std::path::absolute(p).unwrap_or_else(|_| p.clone())),
@@ -510,7 +523,8 @@ fn run(args: &DemoArgs) -> Result<(), Failure> {
     std::fs::write(&summary, serde_json::to_string_pretty(&summary_json(&results))?)
         .with_context(|| format!("cannot write {}", summary.display()))?;
     println!(
-        "\nSVGs (paper Fig. 5 style): {}/mission-<algorithm>.svg; summary: {}; took {:.0} s",
+        "\nSVGs (paper Fig. 5 style): {}/mission-<algorithm>.svg; Foxglove: {}/mission-<algorithm>-s<seed>.mcap; summary: {}; took {:.0} s",
+        args.out.display(),
         args.out.display(),
         summary.display(),
         started.elapsed().as_secs_f64()
