@@ -501,17 +501,7 @@ impl Recorder {
         let (tx, rx) = std::sync::mpsc::sync_channel(config.queue.max(1));
         let dropped = Arc::new(AtomicU64::new(0));
         let stopped = Arc::new(AtomicBool::new(false));
-        let mut writer = Writer {
-            config: config.clone(),
-            daemon_config,
-            maps,
-            file: None,
-            file_index: 0,
-            dropped: Arc::clone(&dropped),
-            dropped_written: 0,
-            started: unix_ns(SystemTime::now()),
-            sequence: 0,
-        };
+        let mut writer = Writer::new(config, daemon_config, maps, Arc::clone(&dropped));
         writer.rotate_existing()?;
         writer.open().map_err(std::io::Error::other)?;
         let stop = Arc::clone(&stopped);
@@ -608,6 +598,25 @@ struct Writer {
 }
 
 impl Writer {
+    fn new(
+        config: &RecordConfig,
+        daemon_config: serde_json::Value,
+        maps: BTreeMap<MapId, Arc<World>>,
+        dropped: Arc<AtomicU64>,
+    ) -> Writer {
+        Writer {
+            config: config.clone(),
+            daemon_config,
+            maps,
+            file: None,
+            file_index: 0,
+            dropped,
+            dropped_written: 0,
+            started: unix_ns(SystemTime::now()),
+            sequence: 0,
+        }
+    }
+
     /// Moves a file left by an earlier run out of the way (rotating like a full one).
     fn rotate_existing(&self) -> std::io::Result<()> {
         if self.config.path.exists() { self.shift() } else { Ok(()) }
@@ -762,33 +771,37 @@ impl Writer {
         self.open()
     }
 
-    fn run(&mut self, rx: Receiver<Record>) {
-        let result = (|| -> Result<(), mcap::McapError> {
-            while let Ok(first) = rx.recv() {
-                let mut more = self.write_record(first)?;
-                // Drain what is queued, then flush once: a killed daemon leaves every
-                // message written before the flush readable.
-                while more {
-                    match rx.try_recv() {
-                        Ok(r) => more = self.write_record(r)?,
-                        Err(_) => break,
-                    }
+    /// Writes what arrives until `Close` (or every sender is gone), then finishes
+    /// the file.
+    fn write_all(&mut self, rx: &Receiver<Record>) -> Result<(), mcap::McapError> {
+        while let Ok(first) = rx.recv() {
+            let mut more = self.write_record(first)?;
+            // Drain what is queued, then flush once: a killed daemon leaves every
+            // message written before the flush readable.
+            while more {
+                match rx.try_recv() {
+                    Ok(r) => more = self.write_record(r)?,
+                    Err(_) => break,
                 }
-                self.write_drops()?;
-                if let Some(f) = &mut self.file {
-                    f.mcap.flush()?;
-                }
-                if !more {
-                    break;
-                }
-                self.rotate_if_full()?;
             }
             self.write_drops()?;
-            if let Some(mut f) = self.file.take() {
-                f.mcap.finish()?;
+            if let Some(f) = &mut self.file {
+                f.mcap.flush()?;
             }
-            Ok(())
-        })();
+            if !more {
+                break;
+            }
+            self.rotate_if_full()?;
+        }
+        self.write_drops()?;
+        if let Some(mut f) = self.file.take() {
+            f.mcap.finish()?;
+        }
+        Ok(())
+    }
+
+    fn run(&mut self, rx: Receiver<Record>) {
+        let result = self.write_all(&rx);
         match result {
             Ok(()) => info!(path = %self.config.path.display(), "recording finished"),
             Err(e) => {
@@ -864,6 +877,49 @@ mod tests {
         assert!(!a.identical(&signed_zero), "-0 and 0 differ in their bits");
         let next = RecordedReply { cost: f64::from_bits((-3.5f64).to_bits() + 1), ..a.clone() };
         assert!(!a.identical(&next));
+    }
+
+    #[test]
+    fn dropped_records_are_counted_and_recorded() {
+        let dir = std::env::temp_dir().join(format!("dyfos-record-drops-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let config = RecordConfig { queue: 1, ..RecordConfig::new(dir.join("drops.mcap")) };
+        // The writer is not draining yet: the queue holds one record, the rest drop.
+        let (tx, rx) = std::sync::mpsc::sync_channel(config.queue);
+        let dropped = Arc::new(AtomicU64::new(0));
+        let recorder = Recorder {
+            tx,
+            dropped: Arc::clone(&dropped),
+            stopped: Arc::new(AtomicBool::new(false)),
+            last_warning: Mutex::new(None),
+        };
+        let change = |v: u64| Record::MapChange {
+            at: v,
+            map: 1,
+            cause: ChangeCause::Apply,
+            deltas: Vec::new(),
+            world: None,
+            from: Some(v),
+            version: v + 1,
+        };
+        for v in 0..3 {
+            recorder.record(change(v));
+        }
+        assert_eq!(dropped.load(Ordering::Relaxed), 2);
+        let mut writer = Writer::new(&config, serde_json::json!({}), BTreeMap::new(), dropped);
+        writer.open().unwrap();
+        let thread = std::thread::spawn(move || writer.run(rx));
+        recorder.close(thread);
+        let bytes = std::fs::read(&config.path).unwrap();
+        let mut by_topic: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            by_topic.entry(m.channel.topic.clone()).or_default().push(serde_json::from_slice(&m.data).unwrap());
+        }
+        assert_eq!(by_topic[topics::MAP_CHANGE].len(), 1);
+        assert_eq!(by_topic[topics::RECORDER].len(), 1);
+        assert_eq!(by_topic[topics::RECORDER][0]["dropped_total"], 2);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -259,6 +259,13 @@ fn apply_change(json: serde_json::Value, worlds: &mut HashMap<(MapId, u64), Arc<
     Ok(())
 }
 
+/// The request and reply of a `/dyfosd/rendezvous` message.
+fn parse_exchange(json: &serde_json::Value) -> Result<(RecordedRequest, RecordedReply), String> {
+    let request = serde_json::from_value(json["request"].clone()).map_err(|e| e.to_string())?;
+    let reply = serde_json::from_value(json["reply"].clone()).map_err(|e| e.to_string())?;
+    Ok((request, reply))
+}
+
 fn short(r: &RecordedReply) -> String {
     if r.status == "ok" {
         format!("ok x = {:?}, E = {:?}, evaluations {:?}, stop {}", r.x, r.cost, r.evaluations, r.stop)
@@ -278,11 +285,7 @@ fn replay_query(
     quiet: bool,
     t: &mut Tally,
 ) {
-    let parsed = (|| -> Result<(RecordedRequest, RecordedReply), String> {
-        let request = serde_json::from_value(json["request"].clone()).map_err(|e| e.to_string())?;
-        let reply = serde_json::from_value(json["reply"].clone()).map_err(|e| e.to_string())?;
-        Ok((request, reply))
-    })();
+    let parsed = parse_exchange(json);
     let request_id = json["request_id"].as_u64().unwrap_or(0);
     let (recorded_request, recorded) = match parsed {
         Ok(p) => p,
