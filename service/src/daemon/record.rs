@@ -5,8 +5,9 @@
 //! bounded queue and never wait for it: when the queue is full a record is dropped
 //! and counted, and the count is itself recorded (channel `/dyfosd/recorder`), so a
 //! replay knows the recording is incomplete. The writer writes unchunked,
-//! uncompressed messages and flushes after every batch, so a daemon killed
-//! mid-record leaves a file readable up to its last complete message. A file that
+//! uncompressed messages and flushes at most [`FLUSH_EVERY`] after each, so a
+//! daemon killed mid-record leaves a file readable up to its last complete message
+//! (losing at most that much). A file that
 //! grows past [`RecordConfig::max_bytes`] is closed and rotated (`FILE.mcap` →
 //! `FILE.1.mcap` → …, [`RecordConfig::keep`] old files kept); every file starts
 //! with the daemon's configuration and build and the full state of every map, so
@@ -30,7 +31,7 @@ use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -366,6 +367,17 @@ impl RecordedReply {
     }
 }
 
+/// A `/dyfosd/rendezvous` message, serialized straight from its parts.
+#[derive(Serialize)]
+struct RendezvousMessage {
+    mode: &'static str,
+    request_id: u64,
+    received_ns: u64,
+    replied_ns: u64,
+    request: RecordedRequest,
+    reply: RecordedReply,
+}
+
 /// A map's content as recorded: obstacle upserts, then one voxel run if it has a
 /// grid (what [`world_from_content`] rebuilds).
 pub fn content_of(world: &World) -> Vec<MapDelta> {
@@ -486,6 +498,11 @@ pub(crate) struct Recorder {
     stopped: Arc<AtomicBool>,
     last_warning: Mutex<Option<Instant>>,
 }
+
+/// How long written messages may wait in the writer's buffer (what a killed daemon
+/// may lose): the file is flushed this often while records keep coming, and this
+/// long after the last one. Flushing per record would cost a system call each.
+pub const FLUSH_EVERY: Duration = Duration::from_millis(20);
 
 /// How often at most a dropped record is logged.
 const DROP_LOG_EVERY: Duration = Duration::from_secs(5);
@@ -706,6 +723,13 @@ impl Writer {
         Ok(())
     }
 
+    fn flush(&mut self) -> Result<(), mcap::McapError> {
+        match &mut self.file {
+            Some(f) => f.mcap.flush(),
+            None => Ok(()),
+        }
+    }
+
     /// Writes one record; `false` on `Close`.
     fn write_record(&mut self, record: Record) -> Result<bool, mcap::McapError> {
         match record {
@@ -723,14 +747,14 @@ impl Writer {
                 self.write(topics::MAP_CHANGE, at, at, &change)?;
             }
             Record::Rendezvous { received, replied, mode, request_id, request, reply } => {
-                let message = serde_json::json!({
-                    "mode": if mode == Mode::Check { "check" } else { "solve" },
-                    "request_id": request_id,
-                    "received_ns": received,
-                    "replied_ns": replied,
-                    "request": RecordedRequest::of(&request),
-                    "reply": RecordedReply::of(&reply),
-                });
+                let message = RendezvousMessage {
+                    mode: if mode == Mode::Check { "check" } else { "solve" },
+                    request_id,
+                    received_ns: received,
+                    replied_ns: replied,
+                    request: RecordedRequest::of(&request),
+                    reply: RecordedReply::of(&reply),
+                };
                 self.write(topics::RENDEZVOUS, received, replied, &message)?;
             }
             Record::Map { received, replied, message } => self.write(topics::MAP, received, replied, &message)?,
@@ -774,10 +798,28 @@ impl Writer {
     /// Writes what arrives until `Close` (or every sender is gone), then finishes
     /// the file.
     fn write_all(&mut self, rx: &Receiver<Record>) -> Result<(), mcap::McapError> {
-        while let Ok(first) = rx.recv() {
+        let mut last_flush = Instant::now();
+        let mut dirty = false;
+        loop {
+            // Unflushed messages: flush once no record came for FLUSH_EVERY.
+            let first = if dirty {
+                match rx.recv_timeout(FLUSH_EVERY) {
+                    Ok(r) => r,
+                    Err(RecvTimeoutError::Timeout) => {
+                        self.flush()?;
+                        (last_flush, dirty) = (Instant::now(), false);
+                        continue;
+                    }
+                    Err(RecvTimeoutError::Disconnected) => break,
+                }
+            } else {
+                match rx.recv() {
+                    Ok(r) => r,
+                    Err(_) => break,
+                }
+            };
             let mut more = self.write_record(first)?;
-            // Drain what is queued, then flush once: a killed daemon leaves every
-            // message written before the flush readable.
+            // Drain what is queued.
             while more {
                 match rx.try_recv() {
                     Ok(r) => more = self.write_record(r)?,
@@ -785,8 +827,13 @@ impl Writer {
                 }
             }
             self.write_drops()?;
-            if let Some(f) = &mut self.file {
-                f.mcap.flush()?;
+            dirty = true;
+            // Messages are complete records in the file's order: whatever the buffer
+            // last wrote, a killed daemon leaves every message before it readable.
+            // Flushing is for how much a crash loses: at most FLUSH_EVERY's worth.
+            if !more || last_flush.elapsed() >= FLUSH_EVERY {
+                self.flush()?;
+                (last_flush, dirty) = (Instant::now(), false);
             }
             if !more {
                 break;
