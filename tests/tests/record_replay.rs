@@ -298,6 +298,33 @@ fn a_killed_recording_daemon_leaves_readable_rotated_files() {
     assert!(out.contains("truncated after") && out.contains(" 0 different"), "{out}");
 }
 
+#[test]
+fn a_failing_recording_stops_with_one_log_line_and_the_daemon_serves_on() {
+    // /dev/full takes the file's creation and fails every write (ENOSPC): a full disk.
+    if !Path::new("/dev/full").exists() {
+        eprintln!("no /dev/full on this system; skipped");
+        return;
+    }
+    let sandbox = Sandbox::new("record-full");
+    let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", "/dev/full"]);
+    let maps = maps();
+    let mut c = sandbox.client();
+    c.upload_map(2, &maps[1].world, false, TIMEOUT).expect("upload");
+    for seed in 0..3 {
+        let request =
+            RendezvousRequest { algorithm: Algorithm::Center, seed, ..RendezvousRequest::new(2, maps[1].belief) };
+        c.rendezvous(&request, TIMEOUT).expect("the daemon answers while its recording fails");
+    }
+    let log = wait_for("the recording to stop", || {
+        let log = daemon.log();
+        log.contains("recording stopped").then_some(log)
+    });
+    assert_eq!(log.matches("recording stopped").count(), 1, "{log}");
+    assert!(log.contains("No space left on device"), "{log}");
+    assert!(daemon.terminate().success(), "{}", daemon.log());
+    assert!(Path::new("/dev/full").exists(), "the device is never rotated away");
+}
+
 /// The seeds of the queries readable in a (maybe unfinished) recording.
 fn seeds_in(bytes: &[u8]) -> Vec<u64> {
     let Ok(stream) = mcap::MessageStream::new_with_options(bytes, mcap::read::Options::IgnoreEndMagic.into()) else {

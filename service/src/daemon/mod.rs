@@ -483,7 +483,7 @@ impl Daemon {
                 let maps = maps.arcs().collect();
                 let (recorder, thread) = record::Recorder::start(rc, config_json(config, threads), maps)
                     .map_err(|source| DaemonCreateError::Record { path: rc.path.clone(), source })?;
-                (Some(Arc::new(recorder)), Some(thread))
+                (Some(Arc::new(recorder)), thread)
             }
         };
         let shared = Arc::new(Shared {

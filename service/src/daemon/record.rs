@@ -514,20 +514,30 @@ impl Recorder {
         config: &RecordConfig,
         daemon_config: serde_json::Value,
         maps: BTreeMap<MapId, Arc<World>>,
-    ) -> std::io::Result<(Recorder, JoinHandle<()>)> {
+    ) -> std::io::Result<(Recorder, Option<JoinHandle<()>>)> {
         let (tx, rx) = std::sync::mpsc::sync_channel(config.queue.max(1));
         let dropped = Arc::new(AtomicU64::new(0));
         let stopped = Arc::new(AtomicBool::new(false));
         let mut writer = Writer::new(config, daemon_config, maps, Arc::clone(&dropped));
         writer.rotate_existing()?;
-        writer.open().map_err(std::io::Error::other)?;
+        match writer.open() {
+            Ok(()) => {}
+            // A path that cannot be created is a mistake to see at start.
+            Err(OpenError::Create(e)) => return Err(e),
+            // A full disk is not: the daemon serves without recording.
+            Err(OpenError::Write(e)) => {
+                error!(path = %config.path.display(), "recording stopped: {} (the daemon carries on without recording)", error_text(&e));
+                stopped.store(true, Ordering::Relaxed);
+                return Ok((Recorder { tx, dropped, stopped, last_warning: Mutex::new(None) }, None));
+            }
+        }
         let stop = Arc::clone(&stopped);
         let handle = std::thread::Builder::new().name("dyfos-recorder".into()).spawn(move || {
             writer.run(rx);
             stop.store(true, Ordering::Relaxed);
         })?;
         info!(path = %config.path.display(), max_bytes = config.max_bytes, keep = config.keep, "recording the daemon's traffic");
-        Ok((Recorder { tx, dropped, stopped, last_warning: Mutex::new(None) }, handle))
+        Ok((Recorder { tx, dropped, stopped, last_warning: Mutex::new(None) }, Some(handle)))
     }
 
     /// Hands `record` to the writer; never waits. A full queue drops it (counted).
@@ -600,6 +610,28 @@ struct Open {
     position: Arc<AtomicU64>,
 }
 
+/// An error with its causes, `: `-separated (the MCAP crate's own text hides the
+/// I/O error, e.g. "No space left on device").
+fn error_text(e: &mcap::McapError) -> String {
+    let mut text = e.to_string();
+    let mut source = std::error::Error::source(e);
+    while let Some(cause) = source {
+        text.push_str(": ");
+        text.push_str(&cause.to_string());
+        source = cause.source();
+    }
+    text
+}
+
+/// Why a file could not be started.
+#[derive(Debug)]
+enum OpenError {
+    /// It could not be created.
+    Create(std::io::Error),
+    /// Its head could not be written.
+    Write(mcap::McapError),
+}
+
 /// The writer thread's state.
 struct Writer {
     config: RecordConfig,
@@ -636,11 +668,20 @@ impl Writer {
 
     /// Moves a file left by an earlier run out of the way (rotating like a full one).
     fn rotate_existing(&self) -> std::io::Result<()> {
-        if self.config.path.exists() { self.shift() } else { Ok(()) }
+        if self.is_regular() { self.shift() } else { Ok(()) }
+    }
+
+    /// Whether the recording's path is a regular file: only those are rotated
+    /// (`--record /dev/…` writes to the device as it is, never renames it).
+    fn is_regular(&self) -> bool {
+        std::fs::symlink_metadata(&self.config.path).is_ok_and(|m| m.is_file())
     }
 
     /// `FILE.(k-1)` → `FILE.k`, …, `FILE` → `FILE.1`; the oldest beyond `keep` is deleted.
     fn shift(&self) -> std::io::Result<()> {
+        if !self.is_regular() {
+            return Ok(());
+        }
         let keep = self.config.keep;
         let oldest = self.config.rotated(keep.max(1));
         if keep == 0 {
@@ -659,8 +700,12 @@ impl Writer {
     }
 
     /// Creates the current file and writes its head.
-    fn open(&mut self) -> Result<(), mcap::McapError> {
-        let file = File::create(&self.config.path)?;
+    fn open(&mut self) -> Result<(), OpenError> {
+        let file = File::create(&self.config.path).map_err(OpenError::Create)?;
+        self.write_head(file).map_err(OpenError::Write)
+    }
+
+    fn write_head(&mut self, file: File) -> Result<(), mcap::McapError> {
         let position = Arc::new(AtomicU64::new(0));
         let out = Counted { inner: BufWriter::with_capacity(1 << 16, file), position: Arc::clone(&position) };
         let options = mcap::WriteOptions::new()
@@ -784,7 +829,7 @@ impl Writer {
             .file
             .as_mut()
             .is_some_and(|f| f.body_messages > 0 && f.position.load(Ordering::Relaxed) >= self.config.max_bytes);
-        if !full {
+        if !full || !self.is_regular() {
             return Ok(());
         }
         if let Some(mut f) = self.file.take() {
@@ -792,7 +837,10 @@ impl Writer {
         }
         self.shift()?;
         self.file_index += 1;
-        self.open()
+        self.open().map_err(|e| match e {
+            OpenError::Create(e) => e.into(),
+            OpenError::Write(e) => e,
+        })
     }
 
     /// Writes what arrives until `Close` (or every sender is gone), then finishes
@@ -852,7 +900,7 @@ impl Writer {
         match result {
             Ok(()) => info!(path = %self.config.path.display(), "recording finished"),
             Err(e) => {
-                error!(path = %self.config.path.display(), "recording stopped: {e} (the daemon carries on; the file is readable up to its last complete message)");
+                error!(path = %self.config.path.display(), "recording stopped: {} (the daemon carries on; the file is readable up to its last complete message)", error_text(&e));
                 // Dropping the writer would try to finish the file again: forget it.
                 if let Some(f) = self.file.take() {
                     std::mem::forget(f.mcap);
