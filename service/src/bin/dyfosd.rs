@@ -265,6 +265,11 @@ mod tests {
         let mixed = config(&cli(&["--legacy-scheduling", "--queue", "fair", "--ipc-priority", "3"])).unwrap();
         assert_eq!((mixed.ipc_priority, mixed.fair_queue), (3, true));
         assert!(Cli::try_parse_from(["dyfosd", "--queue", "lifo"]).is_err());
+        // Recording: off by default; the limits default unless given.
+        assert_eq!(d.record, None);
+        let r = config(&cli(&["--record", "/tmp/t.mcap", "--record-keep", "2"])).unwrap().record.unwrap();
+        assert_eq!((r.path, r.keep, r.max_bytes), (PathBuf::from("/tmp/t.mcap"), 2, 256 << 20));
+        assert!(config(&cli(&["--record", "/tmp/t.mcap", "--record-max-bytes", "0"])).is_err());
         assert!(Cli::try_parse_from(["dyfosd", "--ipc-priority", "100"]).is_err());
         std::fs::write(&file, "prefx = \"typo/\"\n").unwrap();
         let err = format!("{:#}", config(&cli(&["--config", file.to_str().unwrap()])).unwrap_err());
