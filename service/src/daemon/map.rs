@@ -562,13 +562,13 @@ pub(super) fn on_request(daemon: &mut Daemon, active: MapActive) {
             }
             if let (Some(recorder), Some((kind, request))) = (&daemon.shared.recorder, recorded.take()) {
                 let h = &reply.header;
-                let replied = unix_ns(SystemTime::now());
+                let (received, replied) = (unix_ns_of(received), unix_ns(SystemTime::now()));
                 let message = serde_json::json!({
                     "kind": kind, "request_id": header.request_id, "map": header.map_id,
-                    "received_ns": unix_ns_of(received), "replied_ns": replied, "request": request,
+                    "received_ns": received, "replied_ns": replied, "request": request,
                     "reply": {"status": "ok", "version": h.version, "chunk_index": h.chunk_index, "chunk_count": h.chunk_count},
                 });
-                recorder.record(Record::Map { received: unix_ns_of(received), replied, message });
+                recorder.record(Record::Map { received, replied, message });
             }
             reply
         }
