@@ -10,7 +10,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use dyfos_service::daemon::{Daemon, DaemonConfig, DaemonCreateError, HOUSEKEEPING, WaitOutcome};
+use dyfos_service::daemon::{Daemon, DaemonConfig, DaemonCreateError, HOUSEKEEPING, RecordConfig, WaitOutcome};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -27,7 +27,8 @@ struct Cli {
     state_dir: Option<PathBuf>,
     /// TOML file with any of: prefix, state_dir, domain, workers, spin_us,
     /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s, model,
-    /// worker_nice, ipc_priority, spin_max_us, queue, worker_batch.
+    /// worker_nice, ipc_priority, spin_max_us, queue, worker_batch, record,
+    /// record_max_bytes, record_keep.
     #[arg(long)]
     config: Option<PathBuf>,
     /// iceoryx2 file prefix: only processes of the same domain see each other (default iceoryx2's `iox2_`).
@@ -74,6 +75,18 @@ struct Cli {
     /// --spin-max-us 0 --queue fifo`; those flags win if given too).
     #[arg(long)]
     legacy_scheduling: bool,
+    /// Record every accepted request with its reply, every map change and the
+    /// configuration to this MCAP file (off by default; see `dyfos replay` and
+    /// docs/record.md). An existing file is rotated away first.
+    #[arg(long, value_name = "FILE.mcap")]
+    record: Option<PathBuf>,
+    /// Rotate the recording once it is this many bytes (default 268435456, 256 MiB):
+    /// FILE.mcap becomes FILE.1.mcap, and so on.
+    #[arg(long, value_name = "BYTES")]
+    record_max_bytes: Option<u64>,
+    /// Rotated recordings kept besides the current one (default 4).
+    #[arg(long, value_name = "K")]
+    record_keep: Option<usize>,
 }
 
 /// The TOML file's keys; each is optional and a flag overrides it.
@@ -95,6 +108,9 @@ struct FileConfig {
     spin_max_us: Option<u64>,
     queue: Option<String>,
     worker_batch: Option<bool>,
+    record: Option<PathBuf>,
+    record_max_bytes: Option<u64>,
+    record_keep: Option<usize>,
 }
 
 fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
@@ -139,6 +155,18 @@ fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
             None => d.fair_queue && !cli.legacy_scheduling,
         },
         worker_batch: cli.worker_batch || file.worker_batch.unwrap_or(d.worker_batch),
+        record: match cli.record.clone().or(file.record) {
+            None => None,
+            Some(path) => {
+                let mut r = RecordConfig::new(path);
+                r.max_bytes = cli.record_max_bytes.or(file.record_max_bytes).unwrap_or(r.max_bytes);
+                r.keep = cli.record_keep.or(file.record_keep).unwrap_or(r.keep);
+                if r.max_bytes == 0 {
+                    anyhow::bail!("record_max_bytes must be at least 1");
+                }
+                Some(r)
+            }
+        },
     })
 }
 
@@ -237,6 +265,11 @@ mod tests {
         let mixed = config(&cli(&["--legacy-scheduling", "--queue", "fair", "--ipc-priority", "3"])).unwrap();
         assert_eq!((mixed.ipc_priority, mixed.fair_queue), (3, true));
         assert!(Cli::try_parse_from(["dyfosd", "--queue", "lifo"]).is_err());
+        // Recording: off by default; the limits default unless given.
+        assert_eq!(d.record, None);
+        let r = config(&cli(&["--record", "/tmp/t.mcap", "--record-keep", "2"])).unwrap().record.unwrap();
+        assert_eq!((r.path, r.keep, r.max_bytes), (PathBuf::from("/tmp/t.mcap"), 2, 256 << 20));
+        assert!(config(&cli(&["--record", "/tmp/t.mcap", "--record-max-bytes", "0"])).is_err());
         assert!(Cli::try_parse_from(["dyfosd", "--ipc-priority", "100"]).is_err());
         std::fs::write(&file, "prefx = \"typo/\"\n").unwrap();
         let err = format!("{:#}", config(&cli(&["--config", file.to_str().unwrap()])).unwrap_err());

@@ -2,6 +2,7 @@
 //! paged snapshot, delete. Every accepted change is written to the store before
 //! it is visible; a failed write leaves the map as it was.
 
+use super::record::{ChangeCause, Record, Recorder, unix_ns, unix_ns_of};
 use super::{Daemon, Ipc};
 use crate::store::{Store, StoreSaveError};
 use dyfos_shared::limits::{MAX_MAPS, MAX_OBSTACLES, MAX_OCCUPIED_VOXELS, MAX_PENDING_UPLOADS, MAX_TOTAL_VOXELS};
@@ -13,7 +14,7 @@ use dyfos_shared::world::{Bounds, MapDelta, MapDeltaError, MapDeltaErrorKind, Su
 use iceoryx2::active_request::ActiveRequest;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 use tracing::{debug, error, info, warn};
 
 type MapActive = ActiveRequest<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapReplyHeader>;
@@ -120,6 +121,8 @@ pub(crate) struct Maps {
     abandoned: VecDeque<(MapId, u64)>,
     pages: Option<(MapId, u64, Pages)>,
     upload_idle_timeout: Duration,
+    /// Where changes are recorded (`--record`).
+    pub(crate) recorder: Option<Arc<Recorder>>,
 }
 
 impl Maps {
@@ -135,6 +138,7 @@ impl Maps {
             abandoned: VecDeque::new(),
             pages: None,
             upload_idle_timeout,
+            recorder: None,
         }
     }
 
@@ -146,19 +150,50 @@ impl Maps {
         self.maps.iter().map(|(id, w)| (*id, w.as_ref()))
     }
 
+    /// Every map, shared.
+    pub(crate) fn arcs(&self) -> impl Iterator<Item = (MapId, Arc<World>)> + '_ {
+        self.maps.iter().map(|(id, w)| (*id, Arc::clone(w)))
+    }
+
     pub(crate) fn get(&self, id: MapId) -> Option<Arc<World>> {
         self.maps.get(&id).cloned()
     }
 
     /// Persists `world` as map `id` (a new base file), then makes it current.
-    pub(crate) fn commit(&mut self, id: MapId, world: World, what: &str) -> Result<Arc<World>, Rejection> {
+    /// `cause` is `Create` or `Upload`, for the recording.
+    pub(crate) fn commit(
+        &mut self,
+        id: MapId,
+        world: World,
+        what: &str,
+        cause: ChangeCause,
+    ) -> Result<Arc<World>, Rejection> {
         self.check_room(id, &world)?;
         let saved = self.store.save(id, &world);
-        self.publish(id, world, what, saved)
+        let world = self.publish(id, world, what, saved)?;
+        self.record(id, cause, None, Vec::new(), Some(&world), world.version());
+        Ok(world)
+    }
+
+    /// Hands a change to the recorder, if recording.
+    fn record(
+        &self,
+        map: MapId,
+        cause: ChangeCause,
+        from: Option<u64>,
+        deltas: Vec<MapDelta>,
+        world: Option<&Arc<World>>,
+        version: u64,
+    ) {
+        if let Some(r) = &self.recorder {
+            let at = unix_ns(SystemTime::now());
+            r.record(Record::MapChange { at, map, cause, deltas, world: world.cloned(), from, version });
+        }
     }
 
     /// Persists `deltas`, which made `next` from `world`, as a journal record of map
-    /// `id`, then makes `next` current: an update costs what it changes.
+    /// `id`, then makes `next` current: an update costs what it changes. `cause`
+    /// is `Apply` or `Inline`, for the recording.
     pub(crate) fn commit_deltas(
         &mut self,
         id: MapId,
@@ -166,10 +201,15 @@ impl Maps {
         deltas: &[MapDelta],
         next: World,
         what: &str,
+        cause: ChangeCause,
     ) -> Result<Arc<World>, Rejection> {
         self.check_room(id, &next)?;
         let saved = self.store.append(id, world.version(), deltas, &next);
-        self.publish(id, next, what, saved)
+        let next = self.publish(id, next, what, saved)?;
+        if self.recorder.is_some() {
+            self.record(id, cause, Some(world.version()), deltas.to_vec(), Some(&next), next.version());
+        }
+        Ok(next)
     }
 
     /// Whether the daemon may hold `world` as map `id`: the map count, and the
@@ -343,7 +383,7 @@ impl Maps {
         };
         let world = world_from_content(version, u.bounds, u.sun, &u.deltas).map_err(invalid_delta)?;
         let what = format!("uploaded ({} chunks)", u.chunk_count);
-        Ok(self.commit(map, world, &what)?.version())
+        Ok(self.commit(map, world, &what, ChangeCause::Upload)?.version())
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -416,7 +456,7 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
                     format!("map {map} exists; pick another id or delete it first"),
                 ));
             }
-            let world = maps.commit(map, World::empty(bounds, sun), "created")?;
+            let world = maps.commit(map, World::empty(bounds, sun), "created", ChangeCause::Create)?;
             Ok(ok(map, world.version()))
         }
         MapRequest::Apply { map, expected_version, deltas } => {
@@ -424,7 +464,7 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
             check_version(map, &world, expected_version)?;
             let next = world.apply(&deltas).map_err(invalid_delta)?;
             let what = format!("{} deltas applied", deltas.len());
-            Ok(ok(map, maps.commit_deltas(map, &world, &deltas, next, &what)?.version()))
+            Ok(ok(map, maps.commit_deltas(map, &world, &deltas, next, &what, ChangeCause::Apply)?.version()))
         }
         MapRequest::Upload {
             map,
@@ -475,21 +515,60 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
                 )
             })?;
             maps.maps.remove(&map);
+            maps.record(map, ChangeCause::Delete, None, Vec::new(), None, world.version());
             info!(map, version = world.version(), "map deleted");
             Ok(ok(map, world.version()))
         }
     }
 }
 
+/// What the recording shows of a map request (its deltas are in the map change
+/// they made, if any).
+fn request_json(request: &MapRequest) -> (&'static str, serde_json::Value) {
+    use serde_json::json;
+    match request {
+        MapRequest::Create { bounds, sun, .. } => ("create", json!({"bounds": bounds.to_array(), "sun": sun})),
+        MapRequest::Apply { expected_version, deltas, .. } => {
+            ("apply", json!({"expected_version": expected_version, "deltas": deltas.len()}))
+        }
+        MapRequest::Upload { upload_id, chunk_index, chunk_count, replace, expected_version, deltas, .. } => (
+            "upload",
+            json!({"upload_id": upload_id, "chunk_index": chunk_index, "chunk_count": chunk_count,
+                   "replace": replace, "expected_version": expected_version, "deltas": deltas.len()}),
+        ),
+        MapRequest::Snapshot { page, .. } => ("snapshot", json!({"page": page})),
+        MapRequest::Delete { expected_version, .. } => ("delete", json!({"expected_version": expected_version})),
+    }
+}
+
 pub(super) fn on_request(daemon: &mut Daemon, active: MapActive) {
+    let received = Instant::now();
     let header = *active.user_header();
     let reply_to = join_u128(header.reply_to);
-    let result =
-        guarded("map", || MapRequest::decode(&header, active.payload()).and_then(|request| handle(daemon, request)));
+    let recording = daemon.shared.recorder.is_some();
+    let mut recorded: Option<(&'static str, serde_json::Value)> = None;
+    let result = guarded("map", || {
+        MapRequest::decode(&header, active.payload()).and_then(|request| {
+            if recording {
+                recorded = Some(request_json(&request));
+            }
+            handle(daemon, request)
+        })
+    });
     let reply = match result {
         Ok(reply) => {
             if let Ok(mut s) = daemon.shared.stats.lock() {
                 s.map_ok();
+            }
+            if let (Some(recorder), Some((kind, request))) = (&daemon.shared.recorder, recorded.take()) {
+                let h = &reply.header;
+                let (received, replied) = (unix_ns_of(received), unix_ns(SystemTime::now()));
+                let message = serde_json::json!({
+                    "kind": kind, "request_id": header.request_id, "map": header.map_id,
+                    "received_ns": received, "replied_ns": replied, "request": request,
+                    "reply": {"status": "ok", "version": h.version, "chunk_index": h.chunk_index, "chunk_count": h.chunk_count},
+                });
+                recorder.record(Record::Map { received, replied, message });
             }
             reply
         }

@@ -46,10 +46,13 @@
 //! of the domain creates a node.
 
 mod map;
+pub mod record;
 mod rendezvous;
 mod sched;
 mod stats;
 
+pub use record::RecordConfig;
+pub use rendezvous::answer_query;
 pub use sched::IpcScheduling;
 
 use crate::store::{Store, StoreOpenError};
@@ -139,6 +142,8 @@ pub struct DaemonConfig {
     pub fair_queue: bool,
     /// Run the search workers as `SCHED_BATCH` (`--worker-batch`; default off).
     pub worker_batch: bool,
+    /// Record the daemon's traffic to an MCAP file (`--record`; default off).
+    pub record: Option<RecordConfig>,
 }
 
 /// The IPC thread's default real-time priority: low among real-time threads, above
@@ -177,6 +182,7 @@ impl Default for DaemonConfig {
             spin_max: Duration::from_millis(2),
             fair_queue: true,
             worker_batch: false,
+            record: None,
         }
     }
 }
@@ -216,6 +222,39 @@ pub enum DaemonCreateError {
     /// The learned model file is missing, corrupt or of the wrong shape.
     #[error(transparent)]
     Model(#[from] crate::learned::ModelLoadError),
+    /// The recording file (`--record`) cannot be created.
+    #[error("cannot record to {path}: {source}; check the directory exists and is writable, or drop --record")]
+    Record {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+/// The configuration as the head of a recording shows it (`threads`: the workers
+/// started).
+fn config_json(c: &DaemonConfig, threads: usize) -> serde_json::Value {
+    serde_json::json!({
+        "prefix": c.prefix,
+        "domain": c.domain,
+        "state_dir": c.state_dir.display().to_string(),
+        "workers": threads,
+        "max_clients": c.max_clients,
+        "max_requests_per_client": c.max_requests_per_client,
+        "max_queued": c.max_queued,
+        "spin_us": u64::try_from(c.spin.as_micros()).unwrap_or(u64::MAX),
+        "upload_idle_timeout_s": c.upload_idle_timeout.as_secs(),
+        "model": c.model.as_ref().map(|m| m.display().to_string()),
+        "worker_nice": c.worker_nice,
+        "ipc_priority": c.ipc_priority,
+        "spin_max_us": u64::try_from(c.spin_max.as_micros()).unwrap_or(u64::MAX),
+        "queue": if c.fair_queue { "fair" } else { "fifo" },
+        "worker_batch": c.worker_batch,
+        "record": c.record.as_ref().map(|r| serde_json::json!({
+            "path": r.path.display().to_string(), "max_bytes": r.max_bytes, "keep": r.keep, "queue": r.queue,
+        })),
+    })
 }
 
 fn ipc_err(e: impl std::fmt::Debug) -> DaemonCreateError {
@@ -281,6 +320,8 @@ pub(crate) struct Shared {
     pub(crate) watches: Box<[rendezvous::Watch]>,
     /// Weights of the learned SDSMM, if `--model` was given.
     pub(crate) learned: Option<Arc<dyfos_shared::sdsmm::Learned>>,
+    /// The recorder, if `--record` was given.
+    pub(crate) recorder: Option<Arc<record::Recorder>>,
 }
 
 impl Shared {
@@ -325,6 +366,8 @@ pub struct Daemon {
     /// Whether every core is taken, looked up at most every
     /// [`IdleCores::EVERY`](dyfos_client::idle::IdleCores::EVERY).
     cores: dyfos_client::idle::IdleCores,
+    /// The recorder's writer thread, if recording.
+    recorder_thread: Option<JoinHandle<()>>,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -438,6 +481,16 @@ impl Daemon {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = if config.workers == 0 { cores } else { config.workers }.max(2);
         let workers = if config.fair_queue { 2 * threads } else { threads };
+        let mut maps = map::Maps::new(store, loaded.maps.into_iter().take(MAX_MAPS), config.upload_idle_timeout);
+        let (recorder, recorder_thread) = match &config.record {
+            None => (None, None),
+            Some(rc) => {
+                let maps = maps.arcs().collect();
+                let (recorder, thread) = record::Recorder::start(rc, config_json(config, threads), maps)
+                    .map_err(|source| DaemonCreateError::Record { path: rc.path.clone(), source })?;
+                (Some(Arc::new(recorder)), thread)
+            }
+        };
         let shared = Arc::new(Shared {
             queue: Mutex::new(rendezvous::Queue::new(threads, workers, config.fair_queue)),
             work: Condvar::new(),
@@ -447,6 +500,7 @@ impl Daemon {
             workers,
             watches: (0..workers).map(|_| rendezvous::Watch::new()).collect(),
             learned,
+            recorder: recorder.clone(),
         });
         // The IPC thread is this one: try real-time once, then poll-ready (normal)
         // until the first wait. Threads it starts are normal (SCHED_RESET_ON_FORK).
@@ -481,7 +535,7 @@ impl Daemon {
                     .map_err(|e| DaemonCreateError::Ipc(format!("cannot start worker thread: {e}")))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let maps = map::Maps::new(store, loaded.maps.into_iter().take(MAX_MAPS), config.upload_idle_timeout);
+        maps.recorder = recorder;
         for (id, world) in maps.iter() {
             info!(map = id, version = world.version(), obstacles = world.obstacles().len(), "map loaded");
         }
@@ -513,6 +567,7 @@ impl Daemon {
             last_arrival: Instant::now(),
             arrival_gap_us: f64::INFINITY,
             cores: dyfos_client::idle::IdleCores::new(cores),
+            recorder_thread,
         })
     }
 
@@ -718,6 +773,9 @@ impl Daemon {
             if w.join().is_err() {
                 warn!("a worker thread panicked");
             }
+        }
+        if let (Some(recorder), Some(thread)) = (&self.shared.recorder, self.recorder_thread.take()) {
+            recorder.close(thread);
         }
         info!("dyfosd stopped");
     }

@@ -1,6 +1,7 @@
 //! The rendezvous service: validate on the IPC thread, search on a worker.
 
 use super::map::{check_version, guarded, invalid_delta, unknown_map};
+use super::record::{ChangeCause, Record, unix_ns, unix_ns_of};
 use super::{Daemon, Ipc, Shared};
 use crate::search::{Checkpoint, SearchControl};
 use crate::{SearchError, solve};
@@ -15,7 +16,7 @@ use iceoryx2::active_request::ActiveRequest;
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 use tracing::{debug, error, info, trace};
 
 type RendezvousActive = ActiveRequest<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
@@ -403,47 +404,24 @@ fn run(shared: &Shared, watch: &Watch, job: Job, checkpoint: Option<&dyn Checkpo
         (reply, active)
     } else {
         watch.lend(request_id, active);
-        let searched = guarded("rendezvous", || {
-            let model = NoiseModel::from_params_and_weights(&request.params, shared.learned.as_ref())
-                .map_err(|e| Rejection::new(Status::UnsupportedModel, e.to_string()))?;
-            let control = SearchControl {
-                seed: request.seed,
-                budget: request.budget,
-                deadline,
-                threads: shared.threads,
-                abandon: Some(&watch.abandon),
-                checkpoint,
-            };
-            Ok(solve(&world, &request.belief, &request.params, &model, request.algorithm, &control))
-        });
+        let control = SearchControl {
+            seed: request.seed,
+            budget: request.budget,
+            deadline,
+            threads: shared.threads,
+            abandon: Some(&watch.abandon),
+            checkpoint,
+        };
+        let reply = answer_query(&world, &request, request_id, shared.learned.as_ref(), &control);
         let Some(active) = watch.take_back() else {
             error!(request_id, "a running query's request went missing; it gets no reply");
             return;
         };
-        let stop = match &searched {
-            Ok(Ok(answer)) => Some(answer.stop),
-            Ok(Err(SearchError::NoFeasiblePose { stop, .. })) => Some(*stop),
-            Err(_) => None,
-        };
-        if stop == Some(StopReason::Abandoned) {
+        let Some(reply) = reply else {
             lock(&shared.stats).abandoned();
             let micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
             info!(request_id, micros, algorithm = request.algorithm.name(), "query abandoned: its client has gone");
             return;
-        }
-        let reply = match searched.and_then(|solved| {
-            solved.map_err(|e @ SearchError::NoFeasiblePose { stop, .. }| {
-                let status =
-                    if stop == StopReason::Deadline { Status::DeadlineExceeded } else { Status::NoFeasiblePose };
-                Rejection::new(status, e.to_string())
-            })
-        }) {
-            Ok(answer) => RendezvousReply::answer(request_id, &answer),
-            // The inline deltas (if any) were committed on accepting the query: the
-            // reply says which version they made, whatever the search found.
-            Err(rejection) => {
-                RendezvousReply::rejected(request_id, &Rejection { map_version: Some(world.version()), ..rejection })
-            }
         };
         (reply, active)
     };
@@ -459,6 +437,60 @@ fn run(shared: &Shared, watch: &Watch, job: Job, checkpoint: Option<&dyn Checkpo
     }
     debug!(request_id, status = reply.status, micros, map = request.map, version = world.version(), "query answered");
     send(shared, &active, reply, reply_to);
+    if let Some(recorder) = &shared.recorder {
+        recorder.record(Record::Rendezvous {
+            received: unix_ns_of(received),
+            replied: unix_ns(SystemTime::now()),
+            mode: Mode::Solve,
+            request_id,
+            request: Box::new(request),
+            reply: Box::new(reply),
+        });
+    }
+}
+
+/// Searches for an accepted query's answer in `world` (the map after the query's
+/// inline deltas) and makes the reply the daemon sends, without its timing
+/// (`daemon_micros` 0): the one function from a request to a reply, used by the
+/// daemon's workers and by `dyfos replay`. `None` when the search was abandoned
+/// (`control.abandon` raised), as nobody wants its answer. A panic in the search
+/// becomes `internal_error`.
+pub fn answer_query(
+    world: &World,
+    request: &RendezvousRequest,
+    request_id: u64,
+    learned: Option<&Arc<dyfos_shared::sdsmm::Learned>>,
+    control: &SearchControl,
+) -> Option<RendezvousReply> {
+    let searched = guarded("rendezvous", || {
+        let model = NoiseModel::from_params_and_weights(&request.params, learned)
+            .map_err(|e| Rejection::new(Status::UnsupportedModel, e.to_string()))?;
+        Ok(solve(world, &request.belief, &request.params, &model, request.algorithm, control))
+    });
+    let stop = match &searched {
+        Ok(Ok(answer)) => Some(answer.stop),
+        Ok(Err(SearchError::NoFeasiblePose { stop, .. })) => Some(*stop),
+        Err(_) => None,
+    };
+    if stop == Some(StopReason::Abandoned) {
+        return None;
+    }
+    Some(
+        match searched.and_then(|solved| {
+            solved.map_err(|e @ SearchError::NoFeasiblePose { stop, .. }| {
+                let status =
+                    if stop == StopReason::Deadline { Status::DeadlineExceeded } else { Status::NoFeasiblePose };
+                Rejection::new(status, e.to_string())
+            })
+        }) {
+            Ok(answer) => RendezvousReply::answer(request_id, &answer),
+            // The inline deltas (if any) were committed on accepting the query: the
+            // reply says which version they made, whatever the search found.
+            Err(rejection) => {
+                RendezvousReply::rejected(request_id, &Rejection { map_version: Some(world.version()), ..rejection })
+            }
+        },
+    )
 }
 
 /// Sends `reply` and wakes the client.
@@ -475,7 +507,8 @@ fn send(shared: &Shared, active: &RendezvousActive, reply: RendezvousReply, repl
 }
 
 enum Accepted {
-    Checked(u64),
+    /// Checked: the version the query would search, and the request if recording.
+    Checked(u64, Option<Box<RendezvousRequest>>),
     Queued(Box<RendezvousRequest>, Arc<World>),
 }
 
@@ -511,11 +544,18 @@ fn accept(daemon: &mut Daemon, header: &RendezvousRequestHeader, records: &[Wire
         let next = world.apply(&request.deltas).map_err(invalid_delta)?;
         match mode {
             Mode::Check => Arc::new(next),
-            Mode::Solve => daemon.maps.commit_deltas(request.map, &world, &request.deltas, next, "inline deltas")?,
+            Mode::Solve => daemon.maps.commit_deltas(
+                request.map,
+                &world,
+                &request.deltas,
+                next,
+                "inline deltas",
+                ChangeCause::Inline,
+            )?,
         }
     };
     Ok(match mode {
-        Mode::Check => Accepted::Checked(world.version()),
+        Mode::Check => Accepted::Checked(world.version(), daemon.shared.recorder.is_some().then(|| Box::new(request))),
         Mode::Solve => Accepted::Queued(Box::new(request), world),
     })
 }
@@ -537,10 +577,20 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
             reply.daemon_micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
             send(&daemon.shared, &active, reply, reply_to);
         }
-        Ok(Accepted::Checked(version)) => {
+        Ok(Accepted::Checked(version, recorded)) => {
             let mut reply = RendezvousReply::checked(request_id, version);
             reply.daemon_micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
             send(&daemon.shared, &active, reply, reply_to);
+            if let (Some(recorder), Some(request)) = (&daemon.shared.recorder, recorded) {
+                recorder.record(Record::Rendezvous {
+                    received: unix_ns_of(received),
+                    replied: unix_ns(SystemTime::now()),
+                    mode: Mode::Check,
+                    request_id,
+                    request,
+                    reply: Box::new(reply),
+                });
+            }
         }
         Ok(Accepted::Queued(request, world)) => {
             let client = active.origin().value();

@@ -2,12 +2,13 @@
 //! flags, run one library call, print JSON, map errors to exit codes.
 //!
 //! Exit codes: 0 success, 2 invalid input (the message names the field), 3 no
-//! feasible pose, 1 anything else.
+//! feasible pose, 1 anything else; `dyfos replay` has its own (see its `--help`).
 
 mod demo;
 mod hosts;
 mod offline;
 mod online;
+mod replay;
 mod train;
 
 use clap::{Parser, Subcommand};
@@ -37,6 +38,9 @@ enum Command {
     Map(online::MapCommand),
     /// Print dyfosd's health and counters as JSON.
     Stats(online::StatsArgs),
+    /// Re-run every query of a recording (`dyfosd --record`) against this build and
+    /// report, per query, whether the answer is bit-identical.
+    Replay(replay::ReplayArgs),
     /// Simulate camera measurements for training the learned SDSMM.
     TrainData(train::TrainDataArgs),
     /// Train the learned SDSMM on a data set (needs a build with `--features train`).
@@ -88,6 +92,7 @@ fn run(cli: Cli) -> Result<(), Failure> {
         Command::Query(args) => online::query(&args),
         Command::Map(command) => online::map(&command),
         Command::Stats(args) => online::stats(&args),
+        Command::Replay(args) => replay::replay(&args),
         Command::TrainData(args) => train::train_data(&args),
         Command::Train(args) => train::train(&args),
     }
