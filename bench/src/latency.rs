@@ -194,6 +194,10 @@ pub struct RunSamples {
     /// Open loop: how late each request was sent after its scheduled time, ns (the
     /// client process's own scheduling delay; part of its latency).
     pub late_ns: Vec<u64>,
+    /// Open loop: each answered request's latency from its actual send, ns: the
+    /// latency without the client's own wake-up delay.
+    #[serde(default)]
+    pub from_send_ns: Vec<u64>,
     /// Open loop: scheduled requests never sent (the client fell too far behind).
     pub unsent: u64,
     /// Wall time of the measured part, s.
@@ -264,8 +268,12 @@ pub fn drive(
                     out.unsent = (schedule.len() - k) as u64;
                     break;
                 }
-                out.late_ns.push(u64::try_from(target.elapsed().as_nanos()).unwrap_or(u64::MAX));
+                let sent = Instant::now();
+                out.late_ns.push(u64::try_from((sent - target).as_nanos()).unwrap_or(u64::MAX));
                 let outcome = call(k);
+                if outcome.is_ok() {
+                    out.from_send_ns.push(u64::try_from(sent.elapsed().as_nanos()).unwrap_or(u64::MAX));
+                }
                 record(&mut out, outcome, target);
             }
         }
@@ -594,6 +602,13 @@ mod tests {
         // Sent late exactly when charged for the wait.
         let late = run.late_ns.iter().filter(|n| **n > 1_000_000).count();
         assert!(late >= 10, "{late}");
+        // From the send, only the slow request itself took long: the wait is not
+        // counted, and latency = lateness + the rest.
+        assert_eq!(run.from_send_ns.len(), run.latency_ns.len());
+        assert_eq!(run.from_send_ns.iter().filter(|n| **n > 1_000_000).count(), 1);
+        for ((all, late), sent) in run.latency_ns.iter().zip(&run.late_ns).zip(&run.from_send_ns) {
+            assert!(late + sent <= *all && all - late - sent < 1_000_000, "{all} {late} {sent}");
+        }
     }
 
     #[test]

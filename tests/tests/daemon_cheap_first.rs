@@ -2,7 +2,8 @@
 //! searching (and one more query queued), a check-mode query, a `stats` request
 //! and a map snapshot are each answered while all the searches are still
 //! unanswered; and a queued query of a second client is taken before the queued
-//! one of a client that already has searches running (the fair queue).
+//! one of a client that already has searches running (the fair queue), and does
+//! not even wait for a running one to end (a search is held for it).
 //!
 //! The searches check 4097 sight lines a candidate (4096 perimeter points) on a map
 //! whose voxel grid spans the whole search space at 5 cm (as in `daemon_abandon.rs`),
@@ -104,6 +105,49 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
     });
 
     // Give the rest up: the workers go idle.
+    drop(pending);
+    wait_for("the searches to be abandoned", || {
+        let s = admin.stats(PATIENCE).unwrap();
+        (s.running == 0 && s.queued == 0).then_some(())
+    });
+}
+
+/// A client with no search running does not wait for another client's searches to
+/// end: with both cores searching for a client that has three queries in flight,
+/// a second client's short query (the example map) is answered while every one of
+/// the first client's searches is still unanswered, because the daemon holds one
+/// of them at its next checkpoint and runs the short query on its core. Without
+/// holding, the short query would wait behind the 10-minute searches and this test
+/// would run out of patience.
+#[test]
+fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
+    let sandbox = Sandbox::new("hold");
+    let _daemon = sandbox.start_daemon(&["--workers", "2"]);
+    let mut admin = sandbox.client();
+    admin.upload_map(1, &slow_world(), false, PATIENCE).unwrap();
+    let example = Scenario::from_json(&std::fs::read_to_string(dyfos_tests::data("example.json")).unwrap()).unwrap();
+    admin.upload_map(2, &example.world, false, PATIENCE).unwrap();
+
+    let greedy = RawClient::open(&sandbox);
+    let reply = greedy.rendezvous(search(Algorithm::Dyfos, 0).header(Mode::Check, 9, [0, 0]), &[]);
+    assert_eq!(reply.status, 0, "{reply:?}");
+    let pending: Vec<_> = (1..=3).map(|i| send(&greedy, &search(Algorithm::Dyfos, i), i)).collect();
+    wait_for("both workers to search with one query queued", || {
+        let s = admin.stats(PATIENCE).unwrap();
+        (s.running == 2 && s.queued == 1).then_some(())
+    });
+
+    let mut other = sandbox.client();
+    let short = RendezvousRequest { seed: 4, params: example.params, ..RendezvousRequest::new(2, example.belief) };
+    let answer = other.rendezvous(&short, PATIENCE).expect("answered while the greedy client's searches run");
+    assert_eq!(answer.map_version, admin.snapshot(2, PATIENCE).unwrap().version());
+    assert_eq!(answered(&pending), 0, "a 10-minute search finished first");
+    // The held search went on: two of the greedy client's run, one waits.
+    wait_for("the held search to go on", || {
+        let s = admin.stats(PATIENCE).unwrap();
+        (s.running == 2 && s.queued == 1 && s.queries_served == 1).then_some(())
+    });
+
     drop(pending);
     wait_for("the searches to be abandoned", || {
         let s = admin.stats(PATIENCE).unwrap();
