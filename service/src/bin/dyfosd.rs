@@ -64,7 +64,8 @@ struct Cli {
     #[arg(long)]
     spin_max_us: Option<u64>,
     /// How free workers pick queued searches: `fair` (default: the client with the
-    /// fewest running first) or `fifo` (oldest first).
+    /// fewest running first, and a search of the busiest client held while a client
+    /// with none running gets a core) or `fifo` (oldest first, nothing held).
     #[arg(long, value_parser = ["fair", "fifo"])]
     queue: Option<String>,
     /// Run the search workers as SCHED_BATCH.
