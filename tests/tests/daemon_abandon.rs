@@ -1,9 +1,9 @@
 //! A client that goes away mid-query frees its worker: `dyfosd` abandons the
 //! search (no reply, nobody to read it) and counts it in `queries_abandoned`.
 //!
-//! The doomed query is a `brute` search with 4096 perimeter points (4097 sight lines
-//! a candidate) over a map whose voxel grid spans the whole search space at 5 cm (two
-//! occupied cells at opposite corners): minutes of search on two threads, where the
+//! The doomed query is a `brute` search of [`dyfos_tests::slow_search_scenario`]
+//! (4097 sight lines a candidate, each walking a voxel layer near its end): minutes
+//! of search on two threads (brute evaluates far more candidates than `dyfos`), where the
 //! daemon notices a gone client within milliseconds. Nothing here times anything:
 //! the assertions are on the daemon's counters, polled with [`wait_for`].
 

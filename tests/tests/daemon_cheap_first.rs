@@ -117,8 +117,8 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
 /// a second client's short query (the example map) is answered while every one of
 /// the first client's searches is still unanswered, because the daemon holds one
 /// of them at its next checkpoint and runs the short query on its core. Without
-/// holding, the short query would wait behind the 10-minute searches and this test
-/// would run out of patience.
+/// holding (`--queue fifo`), the short query waits for a greedy search to end and
+/// this test fails.
 #[test]
 fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
     let sandbox = Sandbox::new("hold");
@@ -141,7 +141,7 @@ fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
     let short = RendezvousRequest { seed: 4, params: example.params, ..RendezvousRequest::new(2, example.belief) };
     let answer = other.rendezvous(&short, PATIENCE).expect("answered while the greedy client's searches run");
     assert_eq!(answer.map_version, admin.snapshot(2, PATIENCE).unwrap().version());
-    assert_eq!(answered(&pending), 0, "a 10-minute search finished first");
+    assert_eq!(answered(&pending), 0, "a greedy search finished first");
     // The held search went on: two of the greedy client's run, one waits.
     wait_for("the held search to go on", || {
         let s = admin.stats(PATIENCE).unwrap();

@@ -282,11 +282,18 @@ fn a_killed_recording_daemon_leaves_readable_rotated_files() {
         let messages = read_complete(&path);
         assert_eq!(messages[topics::MAP_STATE].len(), 1, "every file starts with the maps' state");
         assert_eq!(messages[topics::CONFIG][0]["file_index"].as_u64(), Some((current - i) as u64));
-        assert!(!messages[topics::RENDEZVOUS].is_empty(), "a file is rotated only once it holds a message");
+        // Which messages a file holds depends on how the writer's batches fell (the
+        // upload's, queries'); that it holds one does not.
+        let body: usize = messages
+            .iter()
+            .filter(|(t, _)| ![topics::CONFIG, topics::MAP_STATE].contains(&t.as_str()))
+            .map(|(_, m)| m.len())
+            .sum();
+        assert!(body > 0, "a file is rotated only once it holds a message");
         let o = replay(&[path.to_str().unwrap()]);
         let out = text(&o);
         assert_eq!(o.status.code(), Some(0), "{out}");
-        assert!(out.contains(" 0 different") && out.contains(" identical"), "{out}");
+        assert!(out.contains(" 0 different"), "{out}");
     }
     // The current file lost only what was not written; it replays up to there.
     let bytes = std::fs::read(&file).unwrap();

@@ -352,16 +352,7 @@ fn true_start(mission: &Mission, seed: u64) -> [f64; 3] {
 /// Runs the mission to the goal, then writes [`RoverConfig::mcap`] if asked for.
 /// `stop` is polled (e.g. [`crate::shutdown::requested`]).
 pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<RoverReport, RoverRunError> {
-    let mut mcap = config.mcap.as_ref().map(|_| McapMission::new(&config.mission));
-    let result = drive(config, stop, &mut mcap);
-    if let (Some(path), Some(mcap)) = (&config.mcap, &mcap) {
-        match mcap.write(path) {
-            Ok(()) => tracing::info!("mission written to {}", path.display()),
-            Err(e) if result.is_ok() => return Err(e.into()),
-            Err(e) => tracing::error!("{e}"),
-        }
-    }
-    result
+    McapMission::around(config.mcap.as_deref(), &config.mission, |mcap| drive(config, stop, mcap))
 }
 
 fn drive(

@@ -391,16 +391,7 @@ impl Viewer<'_> {
 /// Runs until the rover finishes (or goes quiet for `idle_timeout`); then writes
 /// [`ViewerConfig::mcap`], if asked for.
 pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<ViewerReport, ViewerRunError> {
-    let mut mcap = config.mcap.as_ref().map(|_| McapMission::new(&config.mission));
-    let result = serve(config, stop, &mut mcap);
-    if let (Some(path), Some(mcap)) = (&config.mcap, &mcap) {
-        match mcap.write(path) {
-            Ok(()) => tracing::info!("mission written to {}", path.display()),
-            Err(e) if result.is_ok() => return Err(e.into()),
-            Err(e) => tracing::error!("{e}"),
-        }
-    }
-    result
+    McapMission::around(config.mcap.as_deref(), &config.mission, |mcap| serve(config, stop, mcap))
 }
 
 fn serve(

@@ -867,8 +867,10 @@ impl Writer {
                 }
             };
             let mut more = self.write_record(first)?;
-            // Drain what is queued.
+            // Drain what is queued; a full file is rotated at the message that filled
+            // it, so a burst cannot carry a file far past its size.
             while more {
+                self.rotate_if_full()?;
                 match rx.try_recv() {
                     Ok(r) => more = self.write_record(r)?,
                     Err(_) => break,

@@ -370,6 +370,26 @@ impl McapMission {
         std::fs::write(path, bytes).map_err(|source| McapWriteError::Io { path: path.display().to_string(), source })
     }
 
+    /// Runs `run` with a recording of `mission` if `path` is given, then writes the
+    /// file, whatever `run` returned: a failed run leaves its file too. A write error
+    /// is the result if the run succeeded, and a log line if it did not.
+    pub fn around<R, E: From<McapWriteError>>(
+        path: Option<&Path>,
+        mission: &Mission,
+        run: impl FnOnce(&mut Option<McapMission>) -> Result<R, E>,
+    ) -> Result<R, E> {
+        let mut mcap = path.map(|_| McapMission::new(mission));
+        let result = run(&mut mcap);
+        if let (Some(path), Some(mcap)) = (path, &mcap) {
+            match mcap.write(path) {
+                Ok(()) => tracing::info!("mission written to {}", path.display()),
+                Err(e) if result.is_ok() => return Err(e.into()),
+                Err(e) => tracing::error!("{e}"),
+            }
+        }
+        result
+    }
+
     /// Every message: topic, log time (ns), JSON; sorted by time, stable.
     fn messages(&self) -> Vec<(Topic, u64, Value)> {
         let mut out = Vec::new();
