@@ -45,7 +45,7 @@ pub(crate) struct Watch {
     running: Mutex<Option<(u64, RendezvousActive)>>,
     abandon: AtomicBool,
     /// Raised (under the queue's lock) to ask the running search to hand its core
-    /// to a query of a client with none running; see [`Queue::to_hold`].
+    /// to a query of a client with none running; see [`Queue::hold_for_starved`].
     hold: AtomicBool,
 }
 
@@ -161,7 +161,7 @@ impl Queue {
     /// The worker whose search should be held for a starved query, if every core
     /// searches: a light search of the client with the most running (at least 2),
     /// not held yet. Marks it asked.
-    pub(crate) fn to_hold(&mut self) -> Option<usize> {
+    pub(crate) fn hold_for_starved(&mut self) -> Option<usize> {
         if self.active < self.cores || !self.starved() {
             return None;
         }
@@ -596,7 +596,7 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
             let client = active.origin().value();
             let mut q = lock(&daemon.shared.queue);
             q.push(Job { active, request: *request, world, received, reply_to, request_id, client });
-            if let Some(worker) = q.to_hold() {
+            if let Some(worker) = q.hold_for_starved() {
                 daemon.shared.watches[worker].hold.store(true, Ordering::Relaxed);
                 trace!(request_id, worker, "every core searches: holding a search of the busiest client");
             }

@@ -605,11 +605,11 @@ mod tests {
     fn box_queries_agree_with_every_cell_on_dense_blocks() {
         let mut rng = Lcg(23);
         let mut cells: Vec<CellIndex> = Vec::new();
-        for x in -70..90 {
+        for x in -70i64..90 {
             for y in -20..30 {
                 for z in 0..12 {
                     // Dense around x = 0 and x = 64 (two nodes), sparse elsewhere.
-                    let p = if (x as i64).rem_euclid(64) < 12 { 0.5 } else { 0.002 };
+                    let p = if x.rem_euclid(64) < 12 { 0.5 } else { 0.002 };
                     if rng.next() < p {
                         cells.push([x, y, z]);
                     }
