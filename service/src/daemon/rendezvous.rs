@@ -319,6 +319,10 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
             let mut q = lock(&shared.queue);
             loop {
                 if let Some(taken) = q.take(index) {
+                    // A hold asked of this worker's last search, which ended before its
+                    // next checkpoint, is not for this one (cleared under the lock the
+                    // IPC thread asks under).
+                    watch.hold.store(false, Ordering::Relaxed);
                     break taken;
                 }
                 if q.closed {
