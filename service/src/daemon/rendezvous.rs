@@ -104,7 +104,6 @@ pub(crate) struct Queue {
     cores: usize,
     /// Running and not held.
     active: usize,
-    held: usize,
     closed: bool,
     fair: bool,
     /// Clients with searches running and how many each: at most one entry per
@@ -134,7 +133,6 @@ impl Queue {
             heavy_limit: cores.saturating_sub(1).max(1),
             cores,
             active: 0,
-            held: 0,
             closed: false,
             fair,
             running_by: Vec::with_capacity(workers),
@@ -185,7 +183,11 @@ impl Queue {
     /// The search on `worker` stops at its checkpoint: its core is free.
     fn hold(&mut self) {
         self.active -= 1;
-        self.held += 1;
+    }
+
+    /// Searches held at their checkpoint.
+    fn held(&self) -> usize {
+        self.running - self.active
     }
 
     /// Whether a held search may go on: a core is free and no starved query is
@@ -197,7 +199,6 @@ impl Queue {
     /// The held search on `worker` goes on.
     fn go_on(&mut self, worker: usize) {
         self.active += 1;
-        self.held -= 1;
         if let Some(w) = self.on_worker[worker].as_mut() {
             w.held = false;
         }
@@ -240,10 +241,10 @@ impl Queue {
             return None;
         }
         // Held searches go on before new queries, except a starved one's.
-        let (job, heavy) = if !self.light.is_empty() && (self.held == 0 || self.starved()) {
+        let (job, heavy) = if !self.light.is_empty() && (self.held() == 0 || self.starved()) {
             let i = self.next_of(false);
             (self.light.remove(i)?, false)
-        } else if self.held == 0 && self.running_heavy < self.heavy_limit && !self.heavy.is_empty() {
+        } else if self.held() == 0 && self.running_heavy < self.heavy_limit && !self.heavy.is_empty() {
             let i = self.next_of(true);
             (self.heavy.remove(i)?, true)
         } else {
