@@ -7,7 +7,6 @@
 use anyhow::Context;
 use clap::Parser;
 use dyfos_client::mission::Mission;
-use dyfos_client::mission::topics::TopicsConfig;
 use dyfos_client::rover::{RoverConfig, run_rover};
 use dyfos_client::shutdown;
 use std::path::PathBuf;
@@ -19,15 +18,8 @@ use std::time::Duration;
 #[derive(Debug, Parser)]
 #[command(name = "dyfos-rover", version, about, long_about = None)]
 struct Cli {
-    /// Service-name prefix of the daemon and the mission topics.
-    #[arg(long, default_value = dyfos_client::DEFAULT_PREFIX)]
-    prefix: String,
-    /// iceoryx2 domain (file prefix), as given to `dyfosd --domain`.
-    #[arg(long)]
-    domain: Option<String>,
-    /// Mission name: the rover and its viewer must use the same.
-    #[arg(long, default_value = "default")]
-    mission_name: String,
+    #[command(flatten)]
+    topics: dyfos_client::cli::TopicArgs,
     /// Mission file (scenario + waypoints, see `dyfos_client::mission`); default: the built-in mission.
     #[arg(long)]
     mission: Option<PathBuf>,
@@ -67,8 +59,7 @@ fn config(cli: &Cli) -> anyhow::Result<RoverConfig> {
     if !(cli.time_scale.is_finite() && cli.time_scale >= 0.0) {
         anyhow::bail!("--time-scale = {} must be ≥ 0 (0: as fast as possible)", cli.time_scale);
     }
-    let topics =
-        TopicsConfig { prefix: cli.prefix.clone(), domain: cli.domain.clone(), mission: cli.mission_name.clone() };
+    let topics = cli.topics.topics();
     Ok(RoverConfig {
         time_scale: (cli.time_scale > 0.0).then_some(cli.time_scale),
         measurement_timeout: seconds("measurement-timeout", cli.measurement_timeout)?,

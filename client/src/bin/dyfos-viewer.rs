@@ -9,7 +9,6 @@ use anyhow::Context;
 use clap::Parser;
 use dyfos_client::ClientConfig;
 use dyfos_client::mission::Mission;
-use dyfos_client::mission::topics::TopicsConfig;
 use dyfos_client::shutdown;
 use dyfos_client::viewer::{ViewerConfig, run_viewer};
 use dyfos_shared::answer::Algorithm;
@@ -25,15 +24,8 @@ use std::time::Duration;
 #[derive(Debug, Parser)]
 #[command(name = "dyfos-viewer", version, about, long_about = None)]
 struct Cli {
-    /// Service-name prefix of the daemon and the mission topics.
-    #[arg(long, default_value = dyfos_client::DEFAULT_PREFIX)]
-    prefix: String,
-    /// iceoryx2 domain (file prefix), as given to `dyfosd --domain`.
-    #[arg(long)]
-    domain: Option<String>,
-    /// Mission name: the viewer and its rover must use the same.
-    #[arg(long, default_value = "default")]
-    mission_name: String,
+    #[command(flatten)]
+    topics: dyfos_client::cli::TopicArgs,
     /// Mission file (scenario + waypoints, see `dyfos_client::mission`); default: the built-in mission.
     #[arg(long)]
     mission: Option<PathBuf>,
@@ -98,11 +90,10 @@ fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
     if !(cli.time_scale.is_finite() && cli.time_scale >= 0.0) {
         anyhow::bail!("--time-scale = {} must be ≥ 0 (0: as fast as possible)", cli.time_scale);
     }
-    let topics =
-        TopicsConfig { prefix: cli.prefix.clone(), domain: cli.domain.clone(), mission: cli.mission_name.clone() };
+    let topics = cli.topics.topics();
     let client = ClientConfig {
-        prefix: cli.prefix.clone(),
-        domain: cli.domain.clone(),
+        prefix: cli.topics.prefix.clone(),
+        domain: cli.topics.domain.clone(),
         connect_timeout: seconds("connect-timeout", cli.connect_timeout)?,
         ..ClientConfig::default()
     };

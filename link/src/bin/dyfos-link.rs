@@ -5,7 +5,6 @@
 //! bad flags or credentials; 1 otherwise (Zenoh or iceoryx2 failure).
 
 use clap::Parser;
-use dyfos_client::mission::topics::TopicsConfig;
 use dyfos_client::shutdown;
 use dyfos_link::{Link, LinkConfig, LinkStartError, Side};
 use std::path::PathBuf;
@@ -20,15 +19,8 @@ struct Cli {
     /// Which host this is: `rover` or `viewer`.
     #[arg(long, value_parser = parse_side)]
     side: Side,
-    /// Service-name prefix of this host's mission topics (as given to the rover or viewer).
-    #[arg(long, default_value = dyfos_client::DEFAULT_PREFIX)]
-    prefix: String,
-    /// iceoryx2 domain of this host's processes.
-    #[arg(long)]
-    domain: Option<String>,
-    /// Mission name (letters, digits, `-`, `_`, `.`): the same on both hosts.
-    #[arg(long, default_value = "default")]
-    mission_name: String,
+    #[command(flatten)]
+    topics: dyfos_client::cli::TopicArgs,
     /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
     #[arg(long)]
     listen: Vec<String>,
@@ -71,8 +63,7 @@ fn config(cli: &Cli) -> anyhow::Result<(LinkConfig, Option<Duration>)> {
         .map_err(|_| anyhow::anyhow!("--lease = {} must be a number of seconds > 0", cli.lease))?;
     let exit_after = Duration::try_from_secs_f64(cli.exit_after)
         .map_err(|_| anyhow::anyhow!("--exit-after = {} must be a number of seconds ≥ 0", cli.exit_after))?;
-    let topics =
-        TopicsConfig { prefix: cli.prefix.clone(), domain: cli.domain.clone(), mission: cli.mission_name.clone() };
+    let topics = cli.topics.topics();
     let config = LinkConfig {
         listen: cli.listen.clone(),
         connect: cli.connect.clone(),
