@@ -38,6 +38,7 @@
 use crate::evaluation::query_seed;
 use crate::numerical::{NumericalConfig, numerical_maps};
 use crate::stats::quantile_sorted;
+use dyfos_client::idle::IdleCores;
 use dyfos_service::search::SearchControl;
 use dyfos_service::solve;
 use dyfos_shared::scenario::Scenario;
@@ -207,9 +208,13 @@ pub struct RunSamples {
     pub cpu_s: f64,
 }
 
-/// Waits until `target`: sleeps while it is far, spins for the last stretch (a
-/// sleep overshoots by tens of µs, which an open loop would charge as latency).
-fn wait_until(target: Instant) {
+/// Waits until `target`: sleeps while it is far; spins for the last stretch (a
+/// sleep overshoots by tens of µs, which an open loop would charge as latency)
+/// only while a core is idle. When every core is taken, spinning would take CPU
+/// from the daemon under test, and a thread that has just spun is the one the
+/// scheduler lets wait longest; it then sleeps to the target (with a 1 ns timer
+/// slack, see [`precise_timers`]), as a robot's timed loop would.
+fn wait_until(target: Instant, cores: &IdleCores) {
     const SPIN: Duration = Duration::from_micros(150);
     loop {
         let now = Instant::now();
@@ -217,13 +222,27 @@ fn wait_until(target: Instant) {
             return;
         }
         let left = target - now;
-        if left > SPIN {
+        if cores.busy() {
+            std::thread::sleep(left);
+        } else if left > SPIN {
             std::thread::sleep(left - SPIN);
         } else {
             std::hint::spin_loop();
         }
     }
 }
+
+/// Asks for timer wake-ups of the calling thread within 1 ns of their time rather
+/// than the default 50 µs slack, so an open loop's sleep ends on schedule.
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+fn precise_timers() {
+    // SAFETY: PR_SET_TIMERSLACK takes one integer argument and touches no memory.
+    let _ = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong) };
+}
+
+#[cfg(not(target_os = "linux"))]
+fn precise_timers() {}
 
 /// Runs `call(k)` for requests `k = 0, 1, …` for `duration`, closed or open loop
 /// (open: schedule from ChaCha stream (`seed`, `stream`)), and times each.
@@ -260,10 +279,12 @@ pub fn drive(
         }
         Arrivals::Open { rate } => {
             let schedule = poisson_schedule(rate, duration, seed, stream);
+            let cores = IdleCores::of_this_machine();
+            precise_timers();
             let give_up = start + 2 * duration;
             for (k, at) in schedule.iter().enumerate() {
                 let target = start + *at;
-                wait_until(target);
+                wait_until(target, &cores);
                 if Instant::now() >= give_up {
                     out.unsent = (schedule.len() - k) as u64;
                     break;

@@ -71,9 +71,16 @@ struct Cli {
     /// Run the search workers as SCHED_BATCH.
     #[arg(long)]
     worker_batch: bool,
+    /// How often, at most, a running search yields its core to a thread waiting for
+    /// one, µs (default 200; 0: never). Only while more threads are runnable than
+    /// there are cores: a request sent meanwhile then waits at most about this long
+    /// for its process to run, not a scheduler tick.
+    #[arg(long, value_name = "MICROS")]
+    worker_yield_us: Option<u64>,
     /// The scheduling of dyfosd before issue 15, for comparisons: no real-time IPC
-    /// thread, a fixed --spin-us window, a FIFO queue (same as `--ipc-priority 0
-    /// --spin-max-us 0 --queue fifo`; those flags win if given too).
+    /// thread, a fixed --spin-us window, a FIFO queue, searches that never yield
+    /// (same as `--ipc-priority 0 --spin-max-us 0 --queue fifo --worker-yield-us 0`;
+    /// those flags win if given too).
     #[arg(long)]
     legacy_scheduling: bool,
     /// Record every accepted request with its reply, every map change and the
@@ -109,6 +116,7 @@ struct FileConfig {
     spin_max_us: Option<u64>,
     queue: Option<String>,
     worker_batch: Option<bool>,
+    worker_yield_us: Option<u64>,
     record: Option<PathBuf>,
     record_max_bytes: Option<u64>,
     record_keep: Option<usize>,
@@ -156,6 +164,12 @@ fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
             None => d.fair_queue && !cli.legacy_scheduling,
         },
         worker_batch: cli.worker_batch || file.worker_batch.unwrap_or(d.worker_batch),
+        worker_yield: match cli.worker_yield_us.or(file.worker_yield_us) {
+            Some(us) if us > 1_000_000 => anyhow::bail!("worker_yield_us = {us} must be at most 1000000 (1 s)"),
+            Some(us) => Duration::from_micros(us),
+            None if cli.legacy_scheduling => Duration::ZERO,
+            None => d.worker_yield,
+        },
         record: match cli.record.clone().or(file.record) {
             None => None,
             Some(path) => {
@@ -263,6 +277,9 @@ mod tests {
         assert_eq!((d.ipc_priority, d.spin_max, d.fair_queue), (10, Duration::from_millis(2), true));
         let legacy = config(&cli(&["--legacy-scheduling"])).unwrap();
         assert_eq!((legacy.ipc_priority, legacy.spin_max, legacy.fair_queue), (0, Duration::ZERO, false));
+        assert_eq!((d.worker_yield, legacy.worker_yield), (Duration::from_micros(200), Duration::ZERO));
+        assert_eq!(config(&cli(&["--worker-yield-us", "0"])).unwrap().worker_yield, Duration::ZERO);
+        assert!(config(&cli(&["--worker-yield-us", "2000000"])).is_err());
         let mixed = config(&cli(&["--legacy-scheduling", "--queue", "fair", "--ipc-priority", "3"])).unwrap();
         assert_eq!((mixed.ipc_priority, mixed.fair_queue), (3, true));
         assert!(Cli::try_parse_from(["dyfosd", "--queue", "lifo"]).is_err());

@@ -142,6 +142,13 @@ pub struct DaemonConfig {
     pub fair_queue: bool,
     /// Run the search workers as `SCHED_BATCH` (`--worker-batch`; default off).
     pub worker_batch: bool,
+    /// How often, at most, a running search yields its core to a thread waiting for
+    /// one (`--worker-yield-us`, default [`DEFAULT_WORKER_YIELD`]; zero: never). A
+    /// process that wakes while searches run every core would otherwise often wait
+    /// for the next scheduler tick (4 ms at 250 Hz); with it, at most this long.
+    /// A search looks every 64 candidates (≈ 50 µs) and yields only while more
+    /// threads are runnable than there are cores.
+    pub worker_yield: Duration,
     /// Record the daemon's traffic to an MCAP file (`--record`; default off).
     pub record: Option<RecordConfig>,
 }
@@ -149,6 +156,9 @@ pub struct DaemonConfig {
 /// The IPC thread's default real-time priority: low among real-time threads, above
 /// every normal one.
 pub const DEFAULT_IPC_PRIORITY: u8 = 10;
+
+/// How often, at most, a search yields its core to a waiting thread by default.
+pub const DEFAULT_WORKER_YIELD: Duration = Duration::from_micros(200);
 
 /// Nice levels the workers drop when the IPC thread may not run real-time.
 pub const FALLBACK_WORKER_NICE: u8 = 5;
@@ -182,6 +192,7 @@ impl Default for DaemonConfig {
             spin_max: Duration::from_millis(2),
             fair_queue: true,
             worker_batch: false,
+            worker_yield: DEFAULT_WORKER_YIELD,
             record: None,
         }
     }
@@ -251,6 +262,7 @@ fn config_json(c: &DaemonConfig, threads: usize) -> serde_json::Value {
         "spin_max_us": u64::try_from(c.spin_max.as_micros()).unwrap_or(u64::MAX),
         "queue": if c.fair_queue { "fair" } else { "fifo" },
         "worker_batch": c.worker_batch,
+        "worker_yield_us": u64::try_from(c.worker_yield.as_micros()).unwrap_or(u64::MAX),
         "record": c.record.as_ref().map(|r| serde_json::json!({
             "path": r.path.display().to_string(), "max_bytes": r.max_bytes, "keep": r.keep, "queue": r.queue,
         })),
@@ -318,6 +330,8 @@ pub(crate) struct Shared {
     pub(crate) workers: usize,
     /// One per worker: its running query, watched by the IPC thread.
     pub(crate) watches: Box<[rendezvous::Watch]>,
+    /// [`DaemonConfig::worker_yield`].
+    pub(crate) worker_yield: Duration,
     /// Weights of the learned SDSMM, if `--model` was given.
     pub(crate) learned: Option<Arc<dyfos_shared::sdsmm::Learned>>,
     /// The recorder, if `--record` was given.
@@ -499,6 +513,7 @@ impl Daemon {
             threads,
             workers,
             watches: (0..workers).map(|_| rendezvous::Watch::new()).collect(),
+            worker_yield: config.worker_yield,
             learned,
             recorder: recorder.clone(),
         });
@@ -516,9 +531,15 @@ impl Daemon {
             nice = worker_nice,
             policy = if worker_batch { "SCHED_BATCH" } else { "SCHED_OTHER" },
             fair_queue = config.fair_queue,
-            "search workers: {} nice level(s) below the IPC thread; queue served {}",
+            yield_us = config.worker_yield.as_micros() as u64,
+            "search workers: {} nice level(s) below the IPC thread; queue served {}; {}",
             worker_nice,
-            if config.fair_queue { "fairly across clients" } else { "first come, first served" }
+            if config.fair_queue { "fairly across clients" } else { "first come, first served" },
+            if config.worker_yield.is_zero() {
+                "a search keeps its core until the scheduler takes it".to_string()
+            } else {
+                format!("a search yields its core to a waiting thread at most every {:?}", config.worker_yield)
+            }
         );
         let workers = (0..workers)
             .map(|i| {

@@ -5,6 +5,7 @@
 //! Linux only; elsewhere every call here does nothing. The libc calls are the only
 //! unsafe code of the daemon; each says why it is sound.
 
+use std::time::Duration;
 use tracing::{info, warn};
 
 /// What the IPC thread got at start.
@@ -121,6 +122,26 @@ pub(crate) fn set_batch() -> std::io::Result<()> {
     // SAFETY: as in `set_fifo`: a valid `sched_param` on the stack, pid 0 = this thread.
     let r = unsafe { libc::sched_setscheduler(0, libc::SCHED_BATCH, &param) };
     if r == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
+}
+
+/// CPU time the calling thread has used (zero if unknown).
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+pub(crate) fn thread_cpu_time() -> Duration {
+    let mut t = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `t` is a valid, writable `timespec` on the stack; the call writes it
+    // and nothing else.
+    let r = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
+    if r != 0 {
+        return Duration::ZERO;
+    }
+    Duration::new(u64::try_from(t.tv_sec).unwrap_or(0), u32::try_from(t.tv_nsec).unwrap_or(0))
+}
+
+/// CPU time the calling thread has used: unknown off Linux.
+#[cfg(not(target_os = "linux"))]
+pub(crate) fn thread_cpu_time() -> Duration {
+    Duration::ZERO
 }
 
 #[cfg(not(target_os = "linux"))]
