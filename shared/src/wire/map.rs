@@ -622,11 +622,7 @@ pub fn world_from_content(
         }
         merged.push(d.clone());
     }
-    let built = World::empty(bounds, sun).apply(&merged)?;
-    let rebuilt =
-        World::new(version, bounds, sun, built.obstacles().iter().map(|(i, o)| (*i, *o)), built.voxels().cloned());
-    // `apply` validated every obstacle already; `new` cannot fail on its output.
-    rebuilt.map_err(|kind| crate::world::MapDeltaError { index: 0, kind })
+    Ok(World::empty(bounds, sun).apply(&merged)?.at_version(version))
 }
 
 #[cfg(test)]

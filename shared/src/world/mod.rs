@@ -214,6 +214,13 @@ impl World {
         World { version, bounds, sun, obstacles, voxels, bvh, leaves }
     }
 
+    /// The same content at `version`: a map's content read back (a snapshot, a
+    /// file) carries the version it was taken at, not the count of its deltas.
+    pub fn at_version(mut self, version: u64) -> World {
+        self.version = version;
+        self
+    }
+
     /// The map version: 0 when created, +1 per accepted delta.
     pub fn version(&self) -> u64 {
         self.version
