@@ -147,7 +147,9 @@ pub struct DaemonConfig {
     /// process that wakes while searches run every core would otherwise often wait
     /// for the next scheduler tick (4 ms at 250 Hz); with it, at most this long.
     /// A search looks every 64 candidates (≈ 50 µs) and yields only while more
-    /// threads are runnable than there are cores.
+    /// threads are runnable than there are cores and it has had most of its core
+    /// lately (so CPU hogs do not get its share). Linux only; elsewhere it never
+    /// yields.
     pub worker_yield: Duration,
     /// Record the daemon's traffic to an MCAP file (`--record`; default off).
     pub record: Option<RecordConfig>,

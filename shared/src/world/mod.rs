@@ -37,6 +37,7 @@ use parry3d_f64::partitioning::{Bvh, BvhBuildStrategy, TraversalAction};
 use segment::first_contact_aabb;
 use std::collections::BTreeMap;
 use std::f64::consts::FRAC_PI_2;
+use std::sync::OnceLock;
 
 /// The map's axis-aligned rectangle, `[x_min, y_min, x_max, y_max]` in files.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -154,7 +155,11 @@ pub struct World {
     sun: Sun,
     obstacles: BTreeMap<u32, Obstacle>,
     voxels: Option<VoxelGrid>,
-    bvh: Bvh,
+    /// Built at the first query, from `boxes`: a world read only for its content (a
+    /// client's map snapshot, a daemon's map change on its IPC thread) never pays for it.
+    bvh: OnceLock<Bvh>,
+    /// The padded box of each leaf.
+    boxes: Vec<Aabb>,
     leaves: Vec<Leaf>,
 }
 
@@ -210,8 +215,25 @@ impl World {
             leaves.push(Leaf::Voxels);
             boxes.push(padded(aabb));
         }
-        let bvh = if boxes.is_empty() { Bvh::new() } else { Bvh::from_leaves(BvhBuildStrategy::Binned, &boxes) };
-        World { version, bounds, sun, obstacles, voxels, bvh, leaves }
+        World { version, bounds, sun, obstacles, voxels, bvh: OnceLock::new(), boxes, leaves }
+    }
+
+    /// The bounding-volume hierarchy over the leaves, built on first use.
+    #[inline]
+    fn bvh(&self) -> &Bvh {
+        match self.bvh.get() {
+            Some(bvh) => bvh,
+            None => self.build_bvh(),
+        }
+    }
+
+    /// Kept out of line so that the check in [`World::bvh`] is all a search pays.
+    #[cold]
+    #[inline(never)]
+    fn build_bvh(&self) -> &Bvh {
+        self.bvh.get_or_init(|| {
+            if self.boxes.is_empty() { Bvh::new() } else { Bvh::from_leaves(BvhBuildStrategy::Binned, &self.boxes) }
+        })
     }
 
     /// The same content at `version`: a map's content read back (a snapshot, a
@@ -321,7 +343,7 @@ impl World {
         let mut near = [0u32; GATHER_CAPACITY];
         let mut count = 0;
         let mut overflow = false;
-        self.bvh.traverse(|node| {
+        self.bvh().traverse(|node| {
             let (mins, maxs) = (node.mins(), node.maxs());
             if (0..3).any(|a| maxs[a] < lo[a] || mins[a] > hi[a]) {
                 return TraversalAction::Prune;
@@ -356,7 +378,7 @@ impl World {
     /// Whether one segment touches anything, by a BVH walk with early exit.
     fn segment_contact(&self, seg: &Segment) -> bool {
         let mut hit = false;
-        self.bvh.traverse(|node| {
+        self.bvh().traverse(|node| {
             if first_contact_aabb(seg, &node.mins(), &node.maxs()).is_none() {
                 return TraversalAction::Prune;
             }
@@ -375,7 +397,7 @@ impl World {
     /// distance of first contact. For reports, not for the search.
     pub fn contacts(&self, seg: &Segment) -> Vec<(Blocker, f64)> {
         let mut found = Vec::new();
-        self.bvh.traverse(|node| {
+        self.bvh().traverse(|node| {
             if first_contact_aabb(seg, &node.mins(), &node.maxs()).is_none() {
                 return TraversalAction::Prune;
             }
@@ -490,6 +512,23 @@ mod tests {
                 assert!(hits > 300, "n = {n}: only {hits} hits");
             }
         }
+    }
+
+    #[test]
+    fn the_index_is_built_at_the_first_query_and_kept_by_clones() {
+        let mut rng = Lcg(5);
+        let world = random_world(&mut rng, 25);
+        // Read for its content only (a snapshot): no index.
+        assert!(world.bvh.get().is_none());
+        let unqueried = world.clone();
+        let seg = Segment::closed(Point3::new(0.0, 0.0, 1.0), Vector3::new(1.0, 0.0, 0.0), 8.0);
+        let hit = world.any_contact(&[seg]);
+        assert!(world.bvh.get().is_some());
+        let queried = world.clone();
+        assert!(queried.bvh.get().is_some(), "a clone of a queried world keeps its index");
+        assert!(unqueried.bvh.get().is_none());
+        assert_eq!(unqueried.any_contact(&[seg]), hit);
+        assert_eq!(world.any_contact_by_scan(&[seg]), hit);
     }
 
     #[test]
