@@ -71,14 +71,21 @@ pub enum Workload {
     Greedy,
     /// Not a client: a process that burns one core (a CPU hog beside the daemon).
     Hog,
+    /// A client that comes and goes: connects, asks for `stats` and leaves,
+    /// [`CHURN_PER_SECOND`] times a second (a watchdog run from a shell); its
+    /// latency is the whole visit.
+    Churn,
 }
+
+/// Visits a second of the [`Workload::Churn`] client.
+pub const CHURN_PER_SECOND: f64 = 10.0;
 
 /// Queries the greedy client keeps in flight: `dyfosd`'s default limit per client.
 pub const GREEDY_IN_FLIGHT: usize = 4;
 
 impl Workload {
     /// Every workload.
-    pub const ALL: [Workload; 7] = [
+    pub const ALL: [Workload; 8] = [
         Workload::Null,
         Workload::Dyfos,
         Workload::Floor,
@@ -86,6 +93,7 @@ impl Workload {
         Workload::Map,
         Workload::Greedy,
         Workload::Hog,
+        Workload::Churn,
     ];
 
     /// The name used on the command line and in tables.
@@ -98,6 +106,7 @@ impl Workload {
             Workload::Map => "map",
             Workload::Greedy => "greedy",
             Workload::Hog => "hog",
+            Workload::Churn => "churn",
         }
     }
 

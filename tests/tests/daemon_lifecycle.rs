@@ -179,3 +179,50 @@ fn a_reply_meant_for_a_killed_client_never_reaches_the_next_one() {
         wait_for("the orphaned query to end", || (admin.stats(PATIENCE).unwrap().running == 0).then_some(()));
     }
 }
+
+/// Bytes of `/dev/shm` (allocated, not apparent: what a container's `/dev/shm`
+/// limit counts) that the sandbox's processes hold.
+fn shm_allocated(sandbox: &Sandbox) -> u64 {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::read_dir("/dev/shm")
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(&sandbox.domain))
+        .filter_map(|e| e.metadata().ok())
+        .map(|m| m.blocks() * 512)
+        .sum()
+}
+
+#[test]
+fn clients_cost_the_daemon_little_shared_memory_and_snapshots_come_in_pages() {
+    let sandbox = Sandbox::new("shmclients");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut first = sandbox.client();
+    // A map of more records than one snapshot page holds: 40 000 cells, 1 250 blocks.
+    let cells = (0..40_000i64).map(|i| [i % 200, (i / 200) % 50, i / 10_000]);
+    let voxels = dyfos_shared::world::VoxelGrid::new(0.1, na::Point3::new(0.0, 0.0, 0.0), cells).unwrap();
+    let world = World::new(
+        0,
+        Bounds::new([-1.0, -1.0, 30.0, 30.0]).unwrap(),
+        Sun::new(0.5, 0.0).unwrap(),
+        std::iter::empty(),
+        Some(voxels),
+    )
+    .unwrap();
+    let pages = dyfos_shared::wire::map::world_chunks_of(&world, dyfos_shared::limits::SNAPSHOT_PAGE_RECORDS).len();
+    assert!(pages > 2, "{pages} pages");
+    first.upload_map(1, &world, false, PATIENCE).unwrap();
+    let back = first.snapshot(1, PATIENCE).unwrap();
+    assert!(back.same_content(&world), "the paged snapshot is the uploaded map");
+
+    // Each client holds a connection to each of the daemon's services. iceoryx2
+    // 0.10 gave every one to a resizable segment bookkeeping for 255 segments:
+    // 8 MB of /dev/shm a client (Docker's default /dev/shm is 64 MB).
+    let before = shm_allocated(&sandbox);
+    let mut more: Vec<Client> = (0..4).map(|_| sandbox.client()).collect();
+    for c in &mut more {
+        c.stats(PATIENCE).unwrap();
+    }
+    let per_client = shm_allocated(&sandbox).saturating_sub(before) / 4;
+    assert!(per_client < 1 << 20, "{per_client} bytes of /dev/shm per connected client");
+}

@@ -688,6 +688,7 @@ fn documented_constants_are_the_rust_ones() {
         ("WireParams::ALL_SET", WireParams::ALL_SET.to_string()),
         ("MAX_INLINE_DELTAS", MAX_INLINE_DELTAS.to_string()),
         ("MAX_DELTAS_PER_MESSAGE", MAX_DELTAS_PER_MESSAGE.to_string()),
+        ("SNAPSHOT_PAGE_RECORDS", dyfos_shared::limits::SNAPSHOT_PAGE_RECORDS.to_string()),
         ("MAX_UPLOAD_CHUNKS", MAX_UPLOAD_CHUNKS.to_string()),
         ("MAX_PENDING_UPLOADS", MAX_PENDING_UPLOADS.to_string()),
         ("MAX_MAPS", MAX_MAPS.to_string()),

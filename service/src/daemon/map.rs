@@ -5,9 +5,11 @@
 use super::record::{ChangeCause, Record, Recorder, unix_ns, unix_ns_of};
 use super::{Daemon, Ipc};
 use crate::store::{Store, StoreSaveError};
-use dyfos_shared::limits::{MAX_MAPS, MAX_OBSTACLES, MAX_OCCUPIED_VOXELS, MAX_PENDING_UPLOADS, MAX_TOTAL_VOXELS};
+use dyfos_shared::limits::{
+    MAX_MAPS, MAX_OBSTACLES, MAX_OCCUPIED_VOXELS, MAX_PENDING_UPLOADS, MAX_TOTAL_VOXELS, SNAPSHOT_PAGE_RECORDS,
+};
 use dyfos_shared::wire::map::{
-    MapId, MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, world_chunks, world_from_content,
+    MapId, MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, world_chunks_of, world_from_content,
 };
 use dyfos_shared::wire::{Detail, Rejection, Status, join_u128};
 use dyfos_shared::world::{Bounds, MapDelta, MapDeltaError, MapDeltaErrorKind, Sun, VoxelError, World};
@@ -428,7 +430,7 @@ impl Maps {
         match &self.pages {
             Some((m, v, pages)) if *m == id && *v == world.version() => Arc::clone(pages),
             _ => {
-                let pages = Arc::new(world_chunks(world));
+                let pages = Arc::new(world_chunks_of(world, SNAPSHOT_PAGE_RECORDS));
                 self.pages = Some((id, world.version(), Arc::clone(&pages)));
                 pages
             }

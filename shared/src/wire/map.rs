@@ -557,11 +557,20 @@ pub fn decode_deltas(records: &[WireDelta]) -> Result<Vec<MapDelta>, Rejection> 
 }
 
 /// A map's content (obstacles, then occupied voxels) as self-contained chunks of at
-/// most [`MAX_DELTAS_PER_MESSAGE`] records each; at least one chunk, maybe empty.
+/// most [`MAX_DELTAS_PER_MESSAGE`] records each (an upload's chunks); at least one
+/// chunk, maybe empty.
 pub fn world_chunks(world: &World) -> Vec<Vec<WireDelta>> {
+    world_chunks_of(world, MAX_DELTAS_PER_MESSAGE)
+}
+
+/// [`world_chunks`] with at most `max_records` records a chunk (at least 2: a voxel
+/// run's header and one block); the daemon's snapshot pages use
+/// [`crate::limits::SNAPSHOT_PAGE_RECORDS`].
+pub fn world_chunks_of(world: &World, max_records: usize) -> Vec<Vec<WireDelta>> {
+    let max_records = max_records.clamp(2, MAX_DELTAS_PER_MESSAGE);
     let mut chunks: Vec<Vec<WireDelta>> = vec![Vec::new()];
     let room = |chunks: &mut Vec<Vec<WireDelta>>, need: usize| {
-        if chunks.last().is_some_and(|c| c.len() + need > MAX_DELTAS_PER_MESSAGE) {
+        if chunks.last().is_some_and(|c| c.len() + need > max_records) {
             chunks.push(Vec::new());
         }
     };
@@ -575,7 +584,7 @@ pub fn world_chunks(world: &World) -> Vec<Vec<WireDelta>> {
         loop {
             room(&mut chunks, 2.min(1 + usize::from(blocks.peek().is_some())));
             let chunk = chunks.last_mut().expect("one chunk");
-            let take = MAX_DELTAS_PER_MESSAGE - chunk.len() - 1;
+            let take = max_records - chunk.len() - 1;
             let run = MapDelta::SetVoxelBlocks {
                 resolution: grid.resolution(),
                 origin: grid.origin(),
@@ -652,11 +661,16 @@ mod tests {
     fn world_round_trips_through_chunks() {
         for (cells, obstacles) in [(0, 0), (3, 2), (MAX_DELTAS_PER_MESSAGE * 2 + 7, 5000)] {
             let world = sample_world(cells, obstacles);
-            let chunks = world_chunks(&world);
-            assert!(chunks.iter().all(|c| c.len() <= MAX_DELTAS_PER_MESSAGE));
-            let deltas: Vec<MapDelta> = chunks.iter().flat_map(|c| decode_deltas(c).unwrap()).collect();
-            let back = world_from_content(4, *world.bounds(), *world.sun(), &deltas).unwrap();
-            assert_eq!(back, world, "{cells} cells, {obstacles} obstacles");
+            for max in [MAX_DELTAS_PER_MESSAGE, crate::limits::SNAPSHOT_PAGE_RECORDS, 2] {
+                let chunks = world_chunks_of(&world, max);
+                assert!(chunks.iter().all(|c| c.len() <= max), "max {max}");
+                if max == MAX_DELTAS_PER_MESSAGE {
+                    assert_eq!(chunks, world_chunks(&world));
+                }
+                let deltas: Vec<MapDelta> = chunks.iter().flat_map(|c| decode_deltas(c).unwrap()).collect();
+                let back = world_from_content(4, *world.bounds(), *world.sun(), &deltas).unwrap();
+                assert_eq!(back, world, "{cells} cells, {obstacles} obstacles, pages of {max}");
+            }
         }
     }
 

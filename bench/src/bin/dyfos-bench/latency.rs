@@ -11,8 +11,8 @@
 
 use anyhow::{Context, bail};
 use dyfos_bench::latency::{
-    Arrivals, FloorClient, GREEDY_IN_FLIGHT, GreedyClient, Latencies, RequestSet, RunSamples, Workload, drive,
-    in_process, map_id, serve_floor,
+    Arrivals, CHURN_PER_SECOND, FloorClient, GREEDY_IN_FLIGHT, GreedyClient, Latencies, RequestSet, RunSamples,
+    Workload, drive, in_process, map_id, serve_floor,
 };
 use dyfos_bench::svg::{Series, line_plot};
 use dyfos_client::{Client, ClientConfig, RendezvousError};
@@ -125,7 +125,7 @@ pub struct WorkerArgs {
 
 fn parse_workload(s: &str) -> Result<Workload, String> {
     Workload::from_name(s)
-        .ok_or_else(|| format!("unknown workload `{s}`: use floor, null, dyfos, stats, map, greedy or hog"))
+        .ok_or_else(|| format!("unknown workload `{s}`: use floor, null, dyfos, stats, map, greedy, hog or churn"))
 }
 
 const TIMEOUT: Duration = Duration::from_secs(30);
@@ -150,6 +150,17 @@ fn ready_then_go() -> anyhow::Result<()> {
         bail!("expected `go` on stdin, got `{}`", line.trim());
     }
     Ok(())
+}
+
+/// The client configuration of a worker process.
+fn client_config(args: &WorkerArgs) -> ClientConfig {
+    let defaults = ClientConfig::default();
+    ClientConfig {
+        prefix: args.prefix.clone(),
+        domain: Some(args.domain.clone()),
+        connect_timeout: TIMEOUT,
+        spin: args.client_spin_us.map_or(defaults.spin, Duration::from_micros),
+    }
 }
 
 /// The `latency-worker` mode: one client process.
@@ -187,14 +198,17 @@ pub fn worker(args: &WorkerArgs) -> anyhow::Result<()> {
             ready_then_go()?;
             greedy.run(&set, args.index, duration).map_err(anyhow::Error::msg)?
         }
+        Workload::Churn => {
+            let config = client_config(args);
+            Client::connect(&config)?.stats(TIMEOUT)?;
+            ready_then_go()?;
+            drive(Arrivals::Open { rate: CHURN_PER_SECOND }, duration, args.seed, stream, |_| {
+                let mut client = Client::connect(&config).map_err(|_| "no_daemon".to_string())?;
+                client.stats(TIMEOUT).map(|_| None).map_err(|_| "stats_error".to_string())
+            })
+        }
         workload @ (Workload::Null | Workload::Dyfos | Workload::Stats | Workload::Map) => {
-            let defaults = ClientConfig::default();
-            let config = ClientConfig {
-                prefix: args.prefix.clone(),
-                domain: Some(args.domain.clone()),
-                connect_timeout: TIMEOUT,
-                spin: args.client_spin_us.map_or(defaults.spin, Duration::from_micros),
-            };
+            let config = client_config(args);
             let mut client = Client::connect(&config)?;
             let mut call = |k: usize| {
                 let (i, request) = set.pick(args.index, k);
@@ -678,7 +692,7 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
                 result?;
                 served.map_err(anyhow::Error::msg)?;
             }
-            Workload::Greedy | Workload::Hog => {
+            Workload::Greedy | Workload::Hog | Workload::Churn => {
                 bail!("`{}` runs only in the goals (leave it out of --workloads)", w.name())
             }
             Workload::Null | Workload::Dyfos | Workload::Stats | Workload::Map => {
@@ -796,6 +810,7 @@ fn goal_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
         g.push(vec![Group::closed(Workload::Hog, h), Group::closed(Workload::Dyfos, n)]);
     }
     g.push(vec![Group::closed(Workload::Greedy, 1), Group::closed(Workload::Dyfos, 1)]);
+    g.push(vec![Group::open(Workload::Null, 1, rate), Group::closed(Workload::Churn, 1)]);
     g
 }
 
@@ -1026,6 +1041,25 @@ fn goals(a: &LatencyArgs, rows: &[Row], idle: Option<f64>, other: Option<(&[Row]
                 ),
                 _ => ("–".into(), None),
             }
+        },
+    );
+    line(
+        format!(
+            "clients that come and go: null requests ({rate:.0}/s, open loop) while another client connects, asks for `stats` and leaves {CHURN_PER_SECOND:.0}×/s: p99 from the send ≤ 1 ms"
+        ),
+        // From the send: the visitor's own CPU (its connect) delays the sender's
+        // wake-ups too, which is the machine's doing, not the daemon's.
+        &|r, _| {
+            let row = pick(r, Workload::Null, 1, Some(rate), Some(Workload::Churn));
+            let f = row.and_then(|r| r.from_send);
+            let all = row.and_then(|r| r.latency).map_or(String::new(), |l| {
+                format!(" (from the schedule: p50 {} µs, p99 {} µs)", us(l.p50_us), us(l.p99_us))
+            });
+            let max = f.map_or(String::new(), |l| format!(", max {} µs", us(l.max_us)));
+            let visit = pick(r, Workload::Churn, 1, None, Some(Workload::Null))
+                .and_then(|x| x.latency)
+                .map_or(String::new(), |v| format!("; a visit p50 {} ms", us(v.p50_us / 1000.0)));
+            (format!("{}{max}{all}{visit}", lat(f)), f.map(|l| l.p99_us <= 1000.0))
         },
     );
     out
