@@ -226,3 +226,24 @@ fn clients_cost_the_daemon_little_shared_memory_and_snapshots_come_in_pages() {
     let per_client = shm_allocated(&sandbox).saturating_sub(before) / 4;
     assert!(per_client < 1 << 20, "{per_client} bytes of /dev/shm per connected client");
 }
+
+#[test]
+fn a_map_deleted_and_made_again_is_snapshot_with_its_new_content() {
+    let sandbox = Sandbox::new("remade");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let bounds = Bounds::new([0.0, 0.0, 30.0, 30.0]).unwrap();
+    let sun = Sun::new(0.5, 0.0).unwrap();
+    let pole =
+        |x: f64| Obstacle::Cylinder(VerticalCylinder { center: na::Point2::new(x, 5.0), radius: 0.3, height: 2.0 });
+    let old = World::new(0, bounds, sun, [(1, pole(3.0))], None).unwrap();
+    let new = World::new(0, bounds, sun, [(1, pole(7.0))], None).unwrap();
+    client.upload_map(1, &old, false, PATIENCE).unwrap();
+    assert!(client.snapshot(1, PATIENCE).unwrap().same_content(&old));
+    client.delete_map(1, None, PATIENCE).unwrap();
+    // Same id, same version (0), other content.
+    client.upload_map(1, &new, false, PATIENCE).unwrap();
+    let back = client.snapshot(1, PATIENCE).unwrap();
+    assert_eq!(back.version(), 0);
+    assert!(back.same_content(&new), "got the deleted map's content: {:?}", back.obstacles());
+}

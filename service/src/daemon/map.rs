@@ -115,13 +115,34 @@ impl Upload {
     }
 }
 
-/// The maps, their store, uploads in progress and the last snapshot's pages.
+/// The snapshot pages of the last map paged, tied to the very world they were made
+/// from: a map deleted and made again under its id starts again at version 0, so an
+/// id and a version do not name one content.
+#[derive(Default)]
+struct PageCache(Option<(std::sync::Weak<World>, Pages)>);
+
+impl PageCache {
+    /// The pages of `world`, made now unless it was the last world paged.
+    fn get(&mut self, world: &Arc<World>) -> Pages {
+        if let Some((made_from, pages)) = &self.0 {
+            // The Weak keeps the allocation, so its address names that world alone.
+            if std::ptr::eq(made_from.as_ptr(), Arc::as_ptr(world)) {
+                return Arc::clone(pages);
+            }
+        }
+        let pages: Pages = Arc::new(world_chunks_of(world, SNAPSHOT_PAGE_RECORDS));
+        self.0 = Some((Arc::downgrade(world), Arc::clone(&pages)));
+        pages
+    }
+}
+
+/// The maps, their store, uploads in progress and recent snapshots' pages.
 pub(crate) struct Maps {
     maps: BTreeMap<MapId, Arc<World>>,
     store: Store,
     uploads: BTreeMap<MapId, Upload>,
     abandoned: VecDeque<(MapId, u64)>,
-    pages: Option<(MapId, u64, Pages)>,
+    pages: PageCache,
     upload_idle_timeout: Duration,
     /// Where changes are recorded (`--record`).
     pub(crate) recorder: Option<Arc<Recorder>>,
@@ -138,7 +159,7 @@ impl Maps {
             store,
             uploads: BTreeMap::new(),
             abandoned: VecDeque::new(),
-            pages: None,
+            pages: PageCache::default(),
             upload_idle_timeout,
             recorder: None,
         }
@@ -425,16 +446,9 @@ impl Maps {
         Ok(())
     }
 
-    /// The pages of map `id` at its current version (cached for the last map paged).
-    fn pages(&mut self, id: MapId, world: &World) -> Arc<Vec<Vec<WireDelta>>> {
-        match &self.pages {
-            Some((m, v, pages)) if *m == id && *v == world.version() => Arc::clone(pages),
-            _ => {
-                let pages = Arc::new(world_chunks_of(world, SNAPSHOT_PAGE_RECORDS));
-                self.pages = Some((id, world.version(), Arc::clone(&pages)));
-                pages
-            }
-        }
+    /// The snapshot pages of `world` (a map's current world).
+    fn pages(&mut self, world: &Arc<World>) -> Pages {
+        self.pages.get(world)
     }
 }
 
@@ -488,7 +502,7 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
         }
         MapRequest::Snapshot { map, page } => {
             let world = maps.get(map).ok_or_else(|| unknown_map(map))?;
-            let pages = maps.pages(map, &world);
+            let pages = maps.pages(&world);
             let count = pages.len() as u32;
             if page >= count {
                 return Err(Rejection::new(
@@ -621,5 +635,28 @@ mod tests {
         assert_eq!(guarded("test", || Ok(7)), Ok(7));
         let refused: Result<(), Rejection> = guarded("test", || Err(unknown_map(3)));
         assert_eq!(refused.unwrap_err().status, Status::UnknownMap);
+    }
+
+    fn grid_world(cells: i64) -> Arc<World> {
+        let voxels = dyfos_shared::world::VoxelGrid::new(
+            0.1,
+            nalgebra::Point3::origin(),
+            (0..cells).map(|i| [i % 256, (i / 256) % 256, i / 65_536]),
+        )
+        .unwrap();
+        let bounds = Bounds::new([-1.0, -1.0, 30.0, 30.0]).unwrap();
+        Arc::new(World::new(0, bounds, Sun::new(0.5, 0.0).unwrap(), std::iter::empty(), Some(voxels)).unwrap())
+    }
+
+    #[test]
+    fn snapshot_pages_are_kept_for_the_world_they_were_made_from() {
+        let mut cache = PageCache::default();
+        let a = grid_world(19_200);
+        let pages = cache.get(&a);
+        assert!(pages.len() > 1 && Arc::ptr_eq(&pages, &cache.get(&a)), "kept");
+        // Equal content, version and id, but another world (deleted and made again).
+        let again = grid_world(19_200);
+        assert_eq!(again.version(), a.version());
+        assert!(!Arc::ptr_eq(&pages, &cache.get(&again)));
     }
 }
