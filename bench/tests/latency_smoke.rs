@@ -52,6 +52,7 @@ fn latency_command_smoke_run() {
         "| idle: dyfosd CPU",
         "| CPU hog: 1 hog",
         "| greedy client",
+        "| clients that come and go",
     ] {
         assert!(stdout.contains(goal), "missing `{goal}` in\n{stdout}");
     }
@@ -64,9 +65,12 @@ fn latency_command_smoke_run() {
     let rows = rows.as_array().unwrap();
     // floor: 1 closed + 1 open; null and dyfos: 2 closed + 1 open each; the mixed
     // run's two groups; the goals: the hog alone, stats and map beside dyfos (2
-    // each), dyfos alone, hog beside dyfos (2), greedy beside dyfos (2); 2 in-process.
-    assert_eq!(rows.len(), 22, "{rows:#?}");
-    assert_eq!(rows.iter().filter(|r| !r["alongside"].is_null()).count(), 10);
+    // each), dyfos alone, hog beside dyfos (2), greedy beside dyfos (2), null beside
+    // a client that comes and goes (2); 2 in-process.
+    assert_eq!(rows.len(), 24, "{rows:#?}");
+    assert_eq!(rows.iter().filter(|r| !r["alongside"].is_null()).count(), 12);
+    let churn = rows.iter().find(|r| r["workload"] == "churn").expect("the churn row");
+    assert!(churn["latency"]["count"].as_u64().unwrap() > 0, "no visit: {churn}");
     for r in rows.iter().filter(|r| r["workload"] != "hog") {
         assert!(r["answered_per_s"].as_f64().unwrap() > 0.0, "nothing answered: {r}");
         assert!(r["errors"].as_object().unwrap().is_empty(), "errors: {r}");

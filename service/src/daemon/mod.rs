@@ -487,30 +487,26 @@ impl Daemon {
         // dropped unanswered (2 × `max_requests_per_client`); iceoryx2 would otherwise
         // preallocate for every response buffer and borrow slot as well (6× more).
         let responses = clients * 2 * config.max_requests_per_client + 1;
-        let rendezvous_server = rendezvous
-            .server_builder()
-            .max_loaned_responses_per_request(1)
-            .override_response_preallocation(move |_| responses)
-            .create()
-            .map_err(|e| already(&e))?;
+        macro_rules! create_server {
+            ($builder:expr) => {
+                $builder
+                    .max_loaned_responses_per_request(1)
+                    .override_response_preallocation(move |_| responses)
+                    .create()
+                    .map_err(|e| already(&e))?
+            };
+        }
+        let rendezvous_server = create_server!(rendezvous.server_builder());
         // A fixed-size segment of snapshot-page-sized replies: iceoryx2 keeps the
         // bookkeeping of a resizable segment for all of its 255 possible segments per
         // connected client (8 MB of /dev/shm per client, and ~40 ms of this thread each
         // time one connects or leaves, stalling every other client's requests).
-        let map_server = map
-            .server_builder()
-            .initial_max_slice_len(SNAPSHOT_PAGE_RECORDS)
-            .allocation_strategy(AllocationStrategy::Static)
-            .max_loaned_responses_per_request(1)
-            .override_response_preallocation(move |_| responses)
-            .create()
-            .map_err(|e| already(&e))?;
-        let stats_server = stats
-            .server_builder()
-            .max_loaned_responses_per_request(1)
-            .override_response_preallocation(move |_| responses)
-            .create()
-            .map_err(|e| already(&e))?;
+        let map_server = create_server!(
+            map.server_builder()
+                .initial_max_slice_len(SNAPSHOT_PAGE_RECORDS)
+                .allocation_strategy(AllocationStrategy::Static)
+        );
+        let stats_server = create_server!(stats.server_builder());
         let wake = wake_service.listener_builder().create().map_err(ipc_err)?;
         let reply = reply_service.notifier_builder().create().map_err(ipc_err)?;
         let waitset = WaitSetBuilder::new().create::<Ipc>().map_err(ipc_err)?;
