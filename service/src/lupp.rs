@@ -146,6 +146,8 @@ impl<'a> Lupp<'a> {
     /// Prepares the pipeline. `params` must be valid (see [`Params::validate`]).
     pub fn new(world: &'a World, belief: &Belief, params: &Params, model: &'a NoiseModel) -> Self {
         debug_assert!(params.validate().is_ok());
+        // Here, once per search, not at its first candidate.
+        world.build_index();
         let marker = belief.marker(params.marker_height);
         let n = params.perimeter_points;
         let theta = belief.mean.z;

@@ -218,6 +218,12 @@ impl World {
         World { version, bounds, sun, obstacles, voxels, bvh: OnceLock::new(), boxes, leaves }
     }
 
+    /// Builds the index over the leaves now if no query has yet: a search calls it
+    /// before its first candidate, so that evaluating candidates allocates nothing.
+    pub fn build_index(&self) {
+        self.bvh();
+    }
+
     /// The bounding-volume hierarchy over the leaves, built on first use.
     #[inline]
     fn bvh(&self) -> &Bvh {
