@@ -554,7 +554,8 @@ impl Client {
             for page in 1..first.chunk_count {
                 let left = timeout.saturating_sub(start.elapsed());
                 let (h, records) = self.map_call(&MapRequest::Snapshot { map, page }, left)?;
-                if h.version != first.version {
+                // A map deleted and made again meanwhile may be at the same version.
+                if h.version != first.version || h.generation != first.generation {
                     continue 'attempt;
                 }
                 deltas.extend(decode_deltas(&records).map_err(MapRequestError::Invalid)?);

@@ -247,3 +247,35 @@ fn a_map_deleted_and_made_again_is_snapshot_with_its_new_content() {
     assert_eq!(back.version(), 0);
     assert!(back.same_content(&new), "got the deleted map's content: {:?}", back.obstacles());
 }
+
+#[test]
+fn snapshot_pages_of_a_map_deleted_and_made_again_carry_another_generation() {
+    use dyfos_shared::wire::map::MapRequest;
+    let sandbox = Sandbox::new("generation");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    let raw = dyfos_tests::RawClient::open(&sandbox);
+    // Two maps of several snapshot pages each, both at version 0, other content.
+    let grid = |dz: i64| {
+        let cells = (0..40_000i64).map(move |i| [i % 200, (i / 200) % 50, i / 10_000 + dz]);
+        let voxels = dyfos_shared::world::VoxelGrid::new(0.1, na::Point3::new(0.0, 0.0, 0.0), cells).unwrap();
+        World::new(0, Bounds::new([-1.0, -1.0, 30.0, 30.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), [], Some(voxels))
+            .unwrap()
+    };
+    let page = |p: u32| raw.map(MapRequest::Snapshot { map: 1, page: p }.header(u64::from(p), [0, 0]), &[]);
+    client.upload_map(1, &grid(0), false, PATIENCE).unwrap();
+    let (first, _) = page(0);
+    assert!(first.chunk_count > 1 && first.generation != 0, "{first:?}");
+    assert_eq!(page(1).0.generation, first.generation, "pages of one map share its generation");
+
+    // Deleted and made again between two page requests: the version alone cannot tell.
+    client.delete_map(1, None, PATIENCE).unwrap();
+    client.upload_map(1, &grid(10), false, PATIENCE).unwrap();
+    let (second, _) = page(1);
+    assert_eq!((second.status, second.version), (0, first.version));
+    assert_ne!(second.generation, first.generation, "a reader would mix two maps' pages");
+    assert!(client.snapshot(1, PATIENCE).unwrap().same_content(&grid(10)));
+    // Other replies carry no generation.
+    let (stats_like, _) = raw.map(MapRequest::Delete { map: 1, expected_version: None }.header(9, [0, 0]), &[]);
+    assert_eq!((stats_like.status, stats_like.generation), (0, 0));
+}

@@ -269,7 +269,7 @@ fn wire_types() -> Vec<WireType> {
             status,
             chunk_index,
             chunk_count,
-            reserved,
+            generation,
             request_id,
             map_id,
             version,

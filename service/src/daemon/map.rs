@@ -139,6 +139,11 @@ impl PageCache {
 /// The maps, their store, uploads in progress and recent snapshots' pages.
 pub(crate) struct Maps {
     maps: BTreeMap<MapId, Arc<World>>,
+    /// Each map's generation (`MapReplyHeader::generation`): a map deleted and made
+    /// again starts again at version 0, so its snapshot pages tell the two apart by this.
+    generations: BTreeMap<MapId, u32>,
+    /// The generation the next map made gets.
+    next_generation: u32,
     store: Store,
     uploads: BTreeMap<MapId, Upload>,
     abandoned: VecDeque<(MapId, u64)>,
@@ -154,15 +159,37 @@ impl Maps {
         maps: impl IntoIterator<Item = (MapId, World)>,
         upload_idle_timeout: Duration,
     ) -> Self {
-        Maps {
-            maps: maps.into_iter().map(|(id, w)| (id, Arc::new(w))).collect(),
+        let maps: BTreeMap<MapId, Arc<World>> = maps.into_iter().map(|(id, w)| (id, Arc::new(w))).collect();
+        let mut this = Maps {
+            generations: BTreeMap::new(),
+            // Random, so that a client paging across a daemon restart does not see
+            // the generations of the maps it reads again.
+            next_generation: rand::random(),
+            maps: BTreeMap::new(),
             store,
             uploads: BTreeMap::new(),
             abandoned: VecDeque::new(),
             pages: PageCache::default(),
             upload_idle_timeout,
             recorder: None,
+        };
+        for (id, world) in maps {
+            this.made(id);
+            this.maps.insert(id, world);
         }
+        this
+    }
+
+    /// Map `id` is made anew (created, uploaded or loaded): it gets the next
+    /// generation. Never 0, which replies other than a snapshot carry.
+    fn made(&mut self, id: MapId) {
+        self.next_generation = self.next_generation.wrapping_add(1).max(1);
+        self.generations.insert(id, self.next_generation);
+    }
+
+    /// Map `id`'s generation (0 if no map has the id).
+    pub(crate) fn generation(&self, id: MapId) -> u32 {
+        self.generations.get(&id).copied().unwrap_or(0)
     }
 
     pub(crate) fn len(&self) -> usize {
@@ -194,6 +221,7 @@ impl Maps {
         self.check_room(id, &world)?;
         let saved = self.store.save(id, &world);
         let world = self.publish(id, world, what, saved)?;
+        self.made(id);
         self.record(id, cause, None, Vec::new(), Some(&world), world.version());
         Ok(world)
     }
@@ -516,6 +544,7 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
             let mut reply = ok(map, world.version());
             reply.header.chunk_index = page;
             reply.header.chunk_count = count;
+            reply.header.generation = maps.generation(map);
             reply.header.bounds = world.bounds().to_array();
             reply.header.sun = [world.sun().elevation, world.sun().azimuth];
             reply.records = Some((pages, page as usize));
@@ -531,6 +560,7 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
                 )
             })?;
             maps.maps.remove(&map);
+            maps.generations.remove(&map);
             maps.record(map, ChangeCause::Delete, None, Vec::new(), None, world.version());
             info!(map, version = world.version(), "map deleted");
             Ok(ok(map, world.version()))

@@ -143,8 +143,12 @@ pub struct MapReplyHeader {
     pub chunk_index: u32,
     /// Snapshot: the number of pages.
     pub chunk_count: u32,
-    /// 0.
-    pub reserved: u32,
+    /// Snapshot: the map's generation, a number the daemon picks when the map is
+    /// made (created, uploaded or loaded at start). A map deleted and made again
+    /// under its id starts again at version 0 but has another generation, so a
+    /// client paging a snapshot starts again if a page's generation or version
+    /// differs from page 0's. 0 in every other reply.
+    pub generation: u32,
     /// The request's id.
     pub request_id: u64,
     /// The map.
