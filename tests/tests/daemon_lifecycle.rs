@@ -193,22 +193,21 @@ fn shm_allocated(sandbox: &Sandbox) -> u64 {
         .sum()
 }
 
+/// A map at version 0 of more records than one snapshot page holds: 40 000 cells,
+/// 1 250 blocks, `dz` cells up.
+fn grid_of_several_pages(dz: i64) -> World {
+    let cells = (0..40_000i64).map(move |i| [i % 200, (i / 200) % 50, i / 10_000 + dz]);
+    let voxels = dyfos_shared::world::VoxelGrid::new(0.1, na::Point3::new(0.0, 0.0, 0.0), cells).unwrap();
+    World::new(0, Bounds::new([-1.0, -1.0, 30.0, 30.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), [], Some(voxels))
+        .unwrap()
+}
+
 #[test]
 fn clients_cost_the_daemon_little_shared_memory_and_snapshots_come_in_pages() {
     let sandbox = Sandbox::new("shmclients");
     let _daemon = sandbox.start_daemon(&[]);
     let mut first = sandbox.client();
-    // A map of more records than one snapshot page holds: 40 000 cells, 1 250 blocks.
-    let cells = (0..40_000i64).map(|i| [i % 200, (i / 200) % 50, i / 10_000]);
-    let voxels = dyfos_shared::world::VoxelGrid::new(0.1, na::Point3::new(0.0, 0.0, 0.0), cells).unwrap();
-    let world = World::new(
-        0,
-        Bounds::new([-1.0, -1.0, 30.0, 30.0]).unwrap(),
-        Sun::new(0.5, 0.0).unwrap(),
-        std::iter::empty(),
-        Some(voxels),
-    )
-    .unwrap();
+    let world = grid_of_several_pages(0);
     let pages = dyfos_shared::wire::map::world_chunks_of(&world, dyfos_shared::limits::SNAPSHOT_PAGE_RECORDS).len();
     assert!(pages > 2, "{pages} pages");
     first.upload_map(1, &world, false, PATIENCE).unwrap();
@@ -256,12 +255,7 @@ fn snapshot_pages_of_a_map_deleted_and_made_again_carry_another_generation() {
     let mut client = sandbox.client();
     let raw = dyfos_tests::RawClient::open(&sandbox);
     // Two maps of several snapshot pages each, both at version 0, other content.
-    let grid = |dz: i64| {
-        let cells = (0..40_000i64).map(move |i| [i % 200, (i / 200) % 50, i / 10_000 + dz]);
-        let voxels = dyfos_shared::world::VoxelGrid::new(0.1, na::Point3::new(0.0, 0.0, 0.0), cells).unwrap();
-        World::new(0, Bounds::new([-1.0, -1.0, 30.0, 30.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), [], Some(voxels))
-            .unwrap()
-    };
+    let grid = grid_of_several_pages;
     let page = |p: u32| raw.map(MapRequest::Snapshot { map: 1, page: p }.header(u64::from(p), [0, 0]), &[]);
     client.upload_map(1, &grid(0), false, PATIENCE).unwrap();
     let (first, _) = page(0);
@@ -276,6 +270,6 @@ fn snapshot_pages_of_a_map_deleted_and_made_again_carry_another_generation() {
     assert_ne!(second.generation, first.generation, "a reader would mix two maps' pages");
     assert!(client.snapshot(1, PATIENCE).unwrap().same_content(&grid(10)));
     // Other replies carry no generation.
-    let (stats_like, _) = raw.map(MapRequest::Delete { map: 1, expected_version: None }.header(9, [0, 0]), &[]);
-    assert_eq!((stats_like.status, stats_like.generation), (0, 0));
+    let (deleted, _) = raw.map(MapRequest::Delete { map: 1, expected_version: None }.header(9, [0, 0]), &[]);
+    assert_eq!((deleted.status, deleted.generation), (0, 0));
 }

@@ -159,7 +159,6 @@ impl Maps {
         maps: impl IntoIterator<Item = (MapId, World)>,
         upload_idle_timeout: Duration,
     ) -> Self {
-        let maps: BTreeMap<MapId, Arc<World>> = maps.into_iter().map(|(id, w)| (id, Arc::new(w))).collect();
         let mut this = Maps {
             generations: BTreeMap::new(),
             // Random, so that a client paging across a daemon restart does not see
@@ -175,7 +174,7 @@ impl Maps {
         };
         for (id, world) in maps {
             this.made(id);
-            this.maps.insert(id, world);
+            this.maps.insert(id, Arc::new(world));
         }
         this
     }
