@@ -290,6 +290,33 @@ fn cpu_seconds(pid: u32) -> Option<f64> {
     Some(ticks as f64 / 100.0)
 }
 
+/// The machine's CPU time so far from `/proc/stat`'s `cpu` line, in ticks: the
+/// time the hypervisor gave other guests while this one's cores had work
+/// (`steal`), and all of it. `None` off Linux.
+#[derive(Debug, Clone, Copy)]
+struct MachineTicks {
+    steal: u64,
+    total: u64,
+}
+
+impl MachineTicks {
+    fn now() -> Option<Self> {
+        let stat = std::fs::read_to_string("/proc/stat").ok()?;
+        let line = stat.lines().find(|l| l.starts_with("cpu "))?;
+        // user nice system idle iowait irq softirq steal (guest time is inside user).
+        let ticks: Vec<u64> = line.split_whitespace().skip(1).take(8).map(|t| t.parse().ok()).collect::<Option<_>>()?;
+        (ticks.len() == 8).then(|| MachineTicks { steal: ticks[7], total: ticks.iter().sum() })
+    }
+
+    /// The share of the machine's time since `self` that the hypervisor took: a
+    /// shared host's noise, which no design of ours changes (0 on bare metal).
+    fn steal_since(self) -> Option<f64> {
+        let now = MachineTicks::now()?;
+        let total = now.total.checked_sub(self.total).filter(|t| *t > 0)?;
+        Some(now.steal.saturating_sub(self.steal) as f64 / total as f64)
+    }
+}
+
 /// Client processes of one workload in one configuration.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Group {
@@ -333,6 +360,8 @@ struct Row {
     from_send: Option<Latencies>,
     /// Cores the daemon kept busy during the run (its CPU time / wall time).
     daemon_cpu: Option<f64>,
+    /// The share of the machine's time the hypervisor took during the run.
+    steal: Option<f64>,
     /// `dyfos`: search time in the daemon, and end-to-end minus search.
     search: Option<Latencies>,
     /// Hogs: the cores their processes used (CPU time / wall time, summed).
@@ -376,6 +405,7 @@ impl Row {
             rate: group.rate,
             alongside: None,
             daemon_cpu: None,
+            steal: None,
             throughput,
             latency: Latencies::of_nanos(&mut latency),
             late: Latencies::of_nanos(&mut late),
@@ -436,7 +466,7 @@ impl Bench<'_> {
             stdin.flush()?;
         }
         let daemon = self.daemon_pid.get();
-        let (cpu_start, wall_start) = (cpu_seconds(daemon), Instant::now());
+        let (cpu_start, wall_start, machine_start) = (cpu_seconds(daemon), Instant::now(), MachineTicks::now());
         let limit = Duration::from_secs_f64(a.seconds * 3.0) + TIMEOUT;
         let mut runs: Vec<Vec<RunSamples>> = vec![Vec::new(); groups.len()];
         for (c, (g, out)) in children.iter_mut().zip(&outputs) {
@@ -452,10 +482,16 @@ impl Bench<'_> {
             (Some(a), Some(b)) => Some((b - a) / wall_start.elapsed().as_secs_f64()),
             _ => None,
         };
+        let steal = machine_start.and_then(MachineTicks::steal_since);
         let rows = groups.iter().zip(runs).enumerate().map(|(g, (group, runs))| {
             let others: Vec<String> =
                 groups.iter().enumerate().filter(|(o, _)| *o != g).map(|(_, o)| o.label()).collect();
-            Row { alongside: (!others.is_empty()).then(|| others.join(" + ")), daemon_cpu, ..Row::of(*group, runs) }
+            Row {
+                alongside: (!others.is_empty()).then(|| others.join(" + ")),
+                daemon_cpu,
+                steal,
+                ..Row::of(*group, runs)
+            }
         });
         Ok(rows.collect())
     }
@@ -602,7 +638,7 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
         tmp: tmp.clone(),
         daemon_pid: std::cell::Cell::new(0),
     };
-    let load_before = load_average();
+    let (load_before, machine_before) = (load_average(), MachineTicks::now());
     let result = run_with_daemon(&b, &dyfosd).and_then(|(mut report, rows, shutdown, idle)| {
         let mut compared = None;
         if !args.compare_daemon_args.is_empty() {
@@ -613,6 +649,8 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
         if !args.skip_goals {
             report.push_str(&goals(args, &rows, idle, compared.as_ref().map(|(r, i)| (r.as_slice(), *i))));
         }
+        let baseline = compared.as_ref().map_or(&[][..], |(r, _)| r.as_slice());
+        report.push_str(&steal_note(machine_before, &rows, baseline));
         Ok((report, rows, shutdown))
     });
     let left = shm_leftovers(&b.domain);
@@ -627,6 +665,38 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
     write_files(args, &report, &rows)?;
     println!("{report}");
     Ok(())
+}
+
+/// How much of the machine the hypervisor took over the run and in its worst
+/// configuration: on a shared host, a run whose tails moved together with the
+/// steal says more about the neighbours than about the daemon.
+fn steal_note(run_start: Option<MachineTicks>, rows: &[Row], baseline: &[Row]) -> String {
+    let Some(run) = run_start.and_then(MachineTicks::steal_since) else {
+        return String::new();
+    };
+    let worst = rows
+        .iter()
+        .map(|r| (r, ""))
+        .chain(baseline.iter().map(|r| (r, " (the other daemon)")))
+        .filter_map(|(r, which)| Some((r.steal?, r, which)))
+        .max_by(|a, b| a.0.total_cmp(&b.0));
+    let mut out = format!(
+        "\nHost steal time (the hypervisor ran other guests while this one's cores had work): {:.2} % over the run",
+        100.0 * run
+    );
+    if let Some((steal, r, which)) = worst {
+        let beside = r.alongside.as_ref().map_or(String::new(), |a| format!(", beside {a}"));
+        let load = r.rate.map_or("closed loop".to_string(), |x| format!("open loop {x:.0}/s"));
+        let _ = write!(
+            out,
+            "; at most {:.2} % in one configuration: {} {load}, {} client(s){beside}{which}",
+            100.0 * steal,
+            r.workload.name(),
+            r.clients
+        );
+    }
+    out.push_str(".\n");
+    out
 }
 
 type Outcome = (String, Vec<Row>, String, Option<f64>);
@@ -1195,6 +1265,7 @@ fn write_files(args: &LatencyArgs, report: &str, rows: &[Row]) -> anyhow::Result
                 "sent_late": l(r.late),
                 "alongside": r.alongside,
                 "daemon_cpu_cores": r.daemon_cpu,
+                "host_steal": r.steal,
             })
         })
         .collect();
