@@ -80,6 +80,15 @@ fn latency_command_smoke_run() {
         if r["workload"] == "dyfos" {
             assert!(r["search"]["count"].as_u64().unwrap() > 0, "no search times: {r}");
         }
+        // Each configuration run through the daemon says how much of the machine the
+        // hypervisor took meanwhile (a share, 0 on bare metal).
+        if cfg!(target_os = "linux") && r["path"] == "daemon" {
+            let steal = r["host_steal"].as_f64().unwrap_or_else(|| panic!("no host_steal: {r}"));
+            assert!((0.0..=1.0).contains(&steal), "{r}");
+        }
+    }
+    if cfg!(target_os = "linux") {
+        assert!(stdout.contains("Host steal time (the hypervisor ran other guests"), "{stdout}");
     }
     for file in ["latency.md", "latency-null.svg", "latency-dyfos.svg", "latency-throughput.svg"] {
         let text = std::fs::read_to_string(out.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
