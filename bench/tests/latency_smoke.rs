@@ -80,6 +80,13 @@ fn latency_command_smoke_run() {
         if r["workload"] == "dyfos" {
             assert!(r["search"]["count"].as_u64().unwrap() > 0, "no search times: {r}");
         }
+        // An open loop times each request from its send too, without the client's
+        // own lateness: never longer than from its scheduled time.
+        if !r["offered_per_s"].is_null() && r["path"] == "daemon" {
+            let (sent, scheduled) = (&r["from_send"], &r["latency"]);
+            assert_eq!(sent["count"], scheduled["count"], "{r}");
+            assert!(sent["p50_us"].as_f64().unwrap() <= scheduled["p50_us"].as_f64().unwrap(), "{r}");
+        }
         // Each configuration run through the daemon says how much of the machine the
         // hypervisor took meanwhile (a share, 0 on bare metal).
         if cfg!(target_os = "linux") && r["path"] == "daemon" {

@@ -1263,6 +1263,7 @@ fn write_files(args: &LatencyArgs, report: &str, rows: &[Row]) -> anyhow::Result
                 "errors": r.errors,
                 "unsent": r.unsent,
                 "sent_late": l(r.late),
+                "from_send": l(r.from_send),
                 "alongside": r.alongside,
                 "daemon_cpu_cores": r.daemon_cpu,
                 "host_steal": r.steal,
