@@ -66,7 +66,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::server::Server;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2::waitset::{WaitSetAttachmentId, WaitSetRunResult};
 use std::path::PathBuf;
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
@@ -365,7 +365,9 @@ pub struct Daemon {
     map: MapServer,
     stats: StatsServer,
     wake: Listener<Ipc>,
+    /// Where the IPC thread sleeps: on `wake`, attached once, and on SIGINT/SIGTERM.
     waitset: WaitSet<Ipc>,
+    wake_attachment: WaitSetAttachmentId<Ipc>,
     shared: Arc<Shared>,
     workers: Vec<JoinHandle<()>>,
     maps: map::Maps,
@@ -510,6 +512,19 @@ impl Daemon {
         let wake = wake_service.listener_builder().create().map_err(ipc_err)?;
         let reply = reply_service.notifier_builder().create().map_err(ipc_err)?;
         let waitset = WaitSetBuilder::new().create::<Ipc>().map_err(ipc_err)?;
+        // Attached once, for the daemon's life. iceoryx2 0.10's `attach` reads
+        // /proc/sys/fs/epoll/max_user_watches every time, so attaching and detaching
+        // around each sleep made 6 of the 10 system calls of a wake-up: ≈ 8 µs on a
+        // cloud VM, at real-time priority, on a core whose client may be waiting for
+        // it to sleep again (bench/RESULTS.md, "The IPC thread's wake-up"). Forgetting
+        // the guard only skips its detach: the wait set and the listener go together
+        // when the daemon is dropped.
+        let wake_attachment = {
+            let guard = waitset.attach_notification(&wake).map_err(ipc_err)?;
+            let id = WaitSetAttachmentId::from_guard(&guard);
+            std::mem::forget(guard);
+            id
+        };
 
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = if config.workers == 0 { cores } else { config.workers }.max(2);
@@ -596,6 +611,7 @@ impl Daemon {
             stats: stats_server,
             wake,
             waitset,
+            wake_attachment,
             shared,
             workers,
             maps,
@@ -760,25 +776,16 @@ impl Daemon {
         if self.spin() > 0 {
             return WaitOutcome::Work;
         }
-        let guard = match self.waitset.attach_notification(&self.wake) {
-            Ok(g) => g,
-            Err(e) => {
-                warn!("cannot attach the wake-up listener: {e:?}");
-                std::thread::sleep(timeout.min(Duration::from_millis(10)));
-                return WaitOutcome::Idle;
-            }
-        };
         let mut woke = false;
         let result = self.waitset.wait_and_process_once_with_timeout(
             |id| {
-                if id.has_event_from(&guard) {
+                if id == self.wake_attachment {
                     woke = true;
                 }
                 CallbackProgression::Continue
             },
             timeout,
         );
-        drop(guard);
         match result {
             Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => WaitOutcome::Terminate,
             Ok(_) if woke => WaitOutcome::Work,
