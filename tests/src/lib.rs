@@ -253,6 +253,12 @@ impl DaemonProcess {
 impl Drop for DaemonProcess {
     fn drop(&mut self) {
         self.kill9();
+        // A failing test shows what the daemon said: the log goes with the sandbox.
+        if std::thread::panicking() {
+            let log = self.log();
+            let lines: Vec<&str> = log.lines().collect();
+            eprintln!("--- the last lines of dyfosd's log ---\n{}", lines[lines.len().saturating_sub(80)..].join("\n"));
+        }
         let _ = std::fs::remove_file(&self.log);
     }
 }
