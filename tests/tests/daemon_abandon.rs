@@ -6,9 +6,14 @@
 //! of search on two threads (brute evaluates far more candidates than `dyfos`), where the
 //! daemon notices a gone client within milliseconds. Nothing here times anything:
 //! the assertions are on the daemon's counters, polled with [`wait_for`].
+//!
+//! A query whose client leaves while it still waits for a worker is skipped when a
+//! worker takes it, and counted the same way: every accepted query ends served,
+//! failed or abandoned.
 
 use dyfos_client::prelude::*;
-use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, signal, wait_for};
+use dyfos_shared::wire::rendezvous::Mode;
+use dyfos_tests::{ChildGuard, PATIENCE, RawClient, Sandbox, signal, wait_for};
 use std::process::Stdio;
 use std::time::Duration;
 
@@ -106,4 +111,41 @@ fn a_client_that_stops_waiting_abandons_its_query() {
     let answer = impatient.rendezvous(&brute(Some(500)), PATIENCE).expect("answered after giving up once");
     assert_eq!(answer.evaluations.total, 500);
     assert_eq!(admin.stats(PATIENCE).unwrap().queries_served, 1);
+}
+
+/// Both workers search for one client and its third query waits. The client drops
+/// that queued query, then a running one: the freed worker takes the queued query,
+/// finds its client gone and skips it. Both count as abandoned. Before the skip was
+/// counted, the count stayed at 1 and the wait below ran out.
+#[test]
+fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
+    let sandbox = Sandbox::new("abandon-queued");
+    let (_daemon, mut admin) = start(&sandbox);
+    let raw = RawClient::open(&sandbox);
+    let dyfos =
+        RendezvousRequest { algorithm: Algorithm::Dyfos, deadline: Some(Duration::from_secs(600)), ..brute(None) };
+    let send =
+        |request: &RendezvousRequest, id: u64| raw.send(request.header(Mode::Solve, id, [0, 0]), &request.records());
+    let running_brute = send(&brute(None), 1);
+    let running_dyfos = send(&dyfos, 2);
+    let queued = send(&dyfos, 3);
+    wait_for("both workers to search with one query queued", || {
+        let s = admin.stats(PATIENCE).unwrap();
+        (s.running == 2 && s.queued == 1).then_some(())
+    });
+
+    drop(queued);
+    drop(running_dyfos);
+    wait_for("the running search to be abandoned and the dropped queued query skipped", || {
+        let s = admin.stats(PATIENCE).unwrap();
+        (s.queries_abandoned == 2 && s.running == 1 && s.queued == 0).then_some(())
+    });
+    let stats = admin.stats(PATIENCE).unwrap();
+    assert_eq!((stats.queries_served, stats.requests_failed), (0, 0), "{stats:?}");
+
+    drop(running_brute);
+    wait_for("the last search to be abandoned", || {
+        let s = admin.stats(PATIENCE).unwrap();
+        (s.queries_abandoned == 3 && s.running == 0).then_some(())
+    });
 }

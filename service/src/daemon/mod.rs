@@ -40,10 +40,11 @@
 //! A client that goes away mid-query (killed, or dropping its pending response)
 //! frees its worker: while searches run, the IPC thread looks every
 //! [`CLIENT_CHECK`] whether their clients are still connected and abandons the
-//! search of one that is not (no reply; counted as `queries_abandoned` in the
-//! stats). iceoryx2 sees a killed client as gone only once its resources are
-//! cleaned up: at the daemon's next [`HOUSEKEEPING`], or sooner when any process
-//! of the domain creates a node.
+//! search of one that is not; a worker skips a queued query whose client has gone
+//! (no reply either way; both count as `queries_abandoned` in the stats). iceoryx2
+//! sees a killed client as gone only once its resources are cleaned up: at the
+//! daemon's next [`HOUSEKEEPING`], or sooner when any process of the domain creates
+//! a node.
 
 mod map;
 pub mod record;

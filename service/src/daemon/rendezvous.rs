@@ -488,15 +488,21 @@ impl Checkpoint for WorkerCheckpoint<'_> {
     }
 }
 
-/// Searches for `job` and replies, unless its client goes away first: a client that
-/// left before the search started is skipped, one that leaves during it (seen by the
-/// IPC thread through `watch`) abandons the search. Neither gets a reply, as nobody
-/// is there to receive it; an abandoned search is counted in the stats.
+/// Searches for `job` and replies, unless its client goes away first: a query whose
+/// client left while it waited for a worker is skipped, one whose client leaves during
+/// the search (seen by the IPC thread through `watch`) abandons the search. Neither gets
+/// a reply, as nobody is there to receive it. Both count as abandoned in the stats, so
+/// that every accepted query shows there as served, failed or abandoned.
 fn run(shared: &Shared, watch: &Watch, job: Job, checkpoint: Option<&dyn Checkpoint>) {
     let Job { active, request, world, received, reply_to, request_id, client: _ } = job;
     let deadline = request.deadline.map(|d| received + d);
     if !active.is_connected() {
-        debug!(request_id, "client left before its query started; skipped");
+        lock(&shared.stats).abandoned();
+        info!(
+            request_id,
+            algorithm = request.algorithm.name(),
+            "query skipped: its client left while it waited for a worker"
+        );
         return;
     }
     let (mut reply, active) = if deadline.is_some_and(|d| Instant::now() >= d) {

@@ -63,7 +63,8 @@ impl Stats {
         self.dirty = true;
     }
 
-    /// A query whose search was abandoned because its client had gone (no reply).
+    /// A query abandoned because its client had gone, mid-search or while it waited
+    /// for a worker (no reply).
     pub(crate) fn abandoned(&mut self) {
         self.queries_abandoned += 1;
     }

@@ -62,8 +62,9 @@ pub struct StatsReply {
     pub latency_samples: u64,
     /// Error replies by [`Status`] code.
     pub errors_by_code: [u64; STATUS_SLOTS],
-    /// Queries whose search was abandoned because their client went away (killed,
-    /// or dropped its pending response) before the answer; they got no reply.
+    /// Queries abandoned because their client went away (killed, or dropped its
+    /// pending response) before the answer, mid-search or while they waited for a
+    /// worker; they got no reply.
     /// Last, so the fields before keep their offsets.
     pub queries_abandoned: u64,
     /// Times a receive from the daemon's ports failed, e.g. `ExceedsMaxBorrows`
@@ -114,7 +115,8 @@ pub struct DaemonStats {
     pub uptime: std::time::Duration,
     /// Rendezvous queries answered with a pose.
     pub queries_served: u64,
-    /// Queries abandoned because their client went away mid-search (no reply).
+    /// Queries abandoned because their client went away, mid-search or while they
+    /// waited for a worker (no reply).
     pub queries_abandoned: u64,
     /// Requests answered with an error.
     pub requests_failed: u64,
