@@ -324,7 +324,11 @@ fn lower_priority(levels: u8) {
 /// State shared by the IPC thread and the workers.
 pub(crate) struct Shared {
     pub(crate) queue: Mutex<rendezvous::Queue>,
+    /// Idle workers wait here for a job. Any idle worker may take any job, so one
+    /// is woken per job queued or core handed over, not all of them.
     pub(crate) work: Condvar,
+    /// Held searches wait here for a core (see `rendezvous::Queue`).
+    pub(crate) resume: Condvar,
     pub(crate) reply: Notifier<Ipc>,
     pub(crate) stats: Mutex<stats::Stats>,
     pub(crate) threads: usize,
@@ -543,6 +547,7 @@ impl Daemon {
         let shared = Arc::new(Shared {
             queue: Mutex::new(rendezvous::Queue::new(threads, workers, config.fair_queue)),
             work: Condvar::new(),
+            resume: Condvar::new(),
             reply,
             stats: Mutex::new(stats::Stats::new()),
             threads,
@@ -817,6 +822,7 @@ impl Daemon {
             q.close();
         }
         self.shared.work.notify_all();
+        self.shared.resume.notify_all();
         for w in self.workers.drain(..) {
             if w.join().is_err() {
                 warn!("a worker thread panicked");

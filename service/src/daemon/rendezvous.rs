@@ -344,9 +344,15 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
         if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(shared, watch, job, checkpoint))).is_err() {
             error!("a search panicked; its query was dropped");
         }
-        lock(&shared.queue).finish(index, heavy, client);
-        // A heavy job, a held search or a query may have become runnable.
-        shared.work.notify_all();
+        let mut q = lock(&shared.queue);
+        q.finish(index, heavy, client);
+        let held = q.held() > 0;
+        drop(q);
+        // A core is free: a held search may go on, or a query start. This worker
+        // takes the query itself (the loop above), so only held searches are woken.
+        if held {
+            shared.resume.notify_all();
+        }
     }
 }
 
@@ -476,11 +482,16 @@ impl Checkpoint for WorkerCheckpoint<'_> {
         let mut q = lock(&self.shared.queue);
         watch.hold.store(false, Ordering::Relaxed);
         q.hold();
-        self.shared.work.notify_all();
+        // This core is free for the starved query: one idle (spare) worker takes it.
+        self.shared.work.notify_one();
         let held = Instant::now();
         // An abandoned search goes on at once, to see the flag and stop.
         while !q.may_go_on() && !watch.abandon.load(Ordering::Relaxed) {
-            q = self.shared.work.wait_timeout(q, Duration::from_millis(10)).map_or_else(|p| p.into_inner().0, |r| r.0);
+            q = self
+                .shared
+                .resume
+                .wait_timeout(q, Duration::from_millis(10))
+                .map_or_else(|p| p.into_inner().0, |r| r.0);
         }
         q.go_on(self.worker);
         drop(q);
@@ -719,8 +730,9 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
                 trace!(request_id, worker, "every core searches: holding a search of the busiest client");
             }
             drop(q);
-            // Idle and held workers wait on the same condition.
-            daemon.shared.work.notify_all();
+            // One job: one idle worker may take it. Queuing never lets a held search
+            // go on, so those are not woken.
+            daemon.shared.work.notify_one();
         }
     }
 }
