@@ -243,10 +243,20 @@ impl DaemonProcess {
 
     /// SIGTERM, then waits for the exit.
     pub fn terminate(&mut self) -> ExitStatus {
-        signal(self.pid(), "TERM");
-        let status = wait_for("dyfosd to exit after SIGTERM", || self.try_status());
+        self.stop_with("TERM")
+    }
+
+    /// Sends `signal_name` (`TERM`, `INT`), then waits for the exit.
+    pub fn stop_with(&mut self, signal_name: &str) -> ExitStatus {
+        signal(self.pid(), signal_name);
+        let status = wait_for(&format!("dyfosd to exit after SIG{signal_name}"), || self.try_status());
         self.child = None;
         status
+    }
+
+    /// Whether the process has not exited.
+    pub fn is_running(&mut self) -> bool {
+        self.child.is_some() && self.try_status().is_none()
     }
 }
 

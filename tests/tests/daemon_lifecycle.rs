@@ -273,3 +273,38 @@ fn snapshot_pages_of_a_map_deleted_and_made_again_carry_another_generation() {
     let (deleted, _) = raw.map(MapRequest::Delete { map: 1, expected_version: None }.header(9, [0, 0]), &[]);
     assert_eq!((deleted.status, deleted.generation), (0, 0));
 }
+
+/// Stops a process as Ctrl-Z does and continues it as `fg` does (a debugger or
+/// `strace` attaching does the same to it), after `settle` to let it reach its wait.
+fn stop_and_continue(pid: u32, settle: Duration) {
+    std::thread::sleep(settle);
+    signal(pid, "STOP");
+    std::thread::sleep(Duration::from_millis(50));
+    signal(pid, "CONT");
+}
+
+/// A daemon stopped and continued keeps serving: the SIGCONT ends its wait as any
+/// signal does, and only SIGINT and SIGTERM stop it. Regression: it took every
+/// interrupted wait for a Ctrl-C and shut down.
+#[test]
+fn a_stopped_and_continued_daemon_keeps_serving_and_sigint_stops_it() {
+    let sandbox = Sandbox::new("stop-cont");
+    let mut daemon = sandbox.start_daemon(&[]);
+    let s = scenario("golden/scenarios/numerical/map_02.json");
+    let mut client = sandbox.client();
+    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let request = RendezvousRequest { params: s.params, ..RendezvousRequest::new(1, s.belief) };
+    for round in 0..3 {
+        // The settling time lets the daemon go from polling to sleeping in its wait.
+        stop_and_continue(daemon.pid(), Duration::from_millis(20));
+        let answer = client.rendezvous(&request, PATIENCE);
+        assert!(answer.is_ok(), "round {round}: {answer:?}\n{}", daemon.log());
+    }
+    assert!(daemon.is_running(), "{}", daemon.log());
+    assert!(!daemon.log().contains("shutting down"), "{}", daemon.log());
+
+    drop(client);
+    assert!(daemon.stop_with("INT").success(), "{}", daemon.log());
+    assert!(daemon.log().contains("dyfosd stopped"), "{}", daemon.log());
+    assert_eq!(sandbox.shm_leftovers(), Vec::<String>::new());
+}

@@ -281,7 +281,7 @@ fn ipc_err(e: impl std::fmt::Debug) -> DaemonCreateError {
 pub enum WaitOutcome {
     /// A client woke the daemon (or a request was already pending).
     Work,
-    /// The timeout passed.
+    /// The timeout passed, or a signal other than SIGINT and SIGTERM ended the wait.
     Idle,
     /// SIGINT or SIGTERM: call [`Daemon::shutdown`].
     Terminate,
@@ -793,7 +793,12 @@ impl Daemon {
             timeout,
         );
         match result {
-            Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => WaitOutcome::Terminate,
+            Ok(WaitSetRunResult::TerminationRequest) => WaitOutcome::Terminate,
+            // Any signal that interrupts the wait ends up here, not only SIGINT: the
+            // SIGCONT after a Ctrl-Z, a debugger or `strace` attaching. Only SIGINT
+            // and SIGTERM stop the daemon; the rest just end this wait.
+            Ok(WaitSetRunResult::Interrupt) if self.termination_requested() => WaitOutcome::Terminate,
+            Ok(WaitSetRunResult::Interrupt) => WaitOutcome::Idle,
             Ok(_) if woke => WaitOutcome::Work,
             Ok(_) => WaitOutcome::Idle,
             Err(e) => {
