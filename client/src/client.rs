@@ -16,6 +16,7 @@ use dyfos_shared::wire::{DEFAULT_PREFIX, Rejection, ServiceNames, Status, split_
 use dyfos_shared::world::{Bounds, MapDelta, Sun, World};
 use iceoryx2::port::client::Client as ClientPort;
 use iceoryx2::port::listener::Listener;
+use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::request_response::RequestResponseOpenError;
@@ -198,6 +199,7 @@ impl Connection {
         &self,
         spin: Duration,
         timeout: Duration,
+        interrupt: &mut Interrupt,
         mut receive: impl FnMut() -> Result<Option<T>, CallError>,
         is_connected: impl Fn() -> bool,
     ) -> Result<T, CallError> {
@@ -239,7 +241,16 @@ impl Connection {
                 last_cleanup = now;
             }
             let nap = (timeout - elapsed).min(Duration::from_millis(100));
-            self.reply.timed_wait(|_| {}, nap).map_err(ipc)?;
+            match self.reply.timed_wait(|_| {}, nap) {
+                // A signal ended the sleep: the SIGCONT after Ctrl-Z and `fg`, a
+                // debugger attaching, a handler of the caller's. It ends the call only
+                // if the caller's interrupt check says so (below); else wait on.
+                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                Err(e) => return Err(ipc(e)),
+            }
+            if interrupt.requested() {
+                return Err(CallError::Interrupted);
+            }
         }
     }
 }
@@ -256,6 +267,17 @@ pub struct Client {
     /// carries the dead client's id, which no other client uses, so it is dropped
     /// like any reply that is not to the request waiting.
     next_id: u64,
+    interrupt: Interrupt,
+}
+
+/// The caller's interrupt check ([`Client::set_interrupt_check`]), if any.
+#[derive(Default)]
+struct Interrupt(Option<Box<dyn FnMut() -> bool + Send>>);
+
+impl Interrupt {
+    fn requested(&mut self) -> bool {
+        self.0.as_mut().is_some_and(|check| check())
+    }
 }
 
 impl std::fmt::Debug for Client {
@@ -269,8 +291,13 @@ impl Client {
     /// `config.connect_timeout` for it to appear.
     pub fn connect(config: &ClientConfig) -> Result<Client, ClientOpenError> {
         let names = ServiceNames::new(&config.prefix)?;
-        let mut client =
-            Client { config: config.clone(), names, conn: None, next_id: unique_u64(0x7265_7175_6573_7473) };
+        let mut client = Client {
+            config: config.clone(),
+            names,
+            conn: None,
+            next_id: unique_u64(0x7265_7175_6573_7473),
+            interrupt: Interrupt::default(),
+        };
         client.ensure_connected(config.connect_timeout)?;
         Ok(client)
     }
@@ -278,6 +305,16 @@ impl Client {
     /// The configuration this client was made with.
     pub fn config(&self) -> &ClientConfig {
         &self.config
+    }
+
+    /// Lets the caller end a call while it waits for its reply: `check` runs about
+    /// every 100 ms of the wait (once it sleeps) and when a signal interrupts it, and
+    /// `true` ends the call with `Interrupted`. The Python binding uses it to raise
+    /// `KeyboardInterrupt` on Ctrl-C. Without a check, a signal never ends a call:
+    /// Ctrl-Z and `fg`, or a debugger attaching, leave the query waiting for its
+    /// answer, and only the call's timeout bounds the wait.
+    pub fn set_interrupt_check(&mut self, check: Option<Box<dyn FnMut() -> bool + Send>>) {
+        self.interrupt = Interrupt(check);
     }
 
     fn ensure_connected(&mut self, limit: Duration) -> Result<(), ClientOpenError> {
@@ -309,12 +346,14 @@ impl Client {
     fn with_connection<T>(
         &mut self,
         timeout: Duration,
-        call: impl FnOnce(&Connection, u64, &ClientConfig, &ServiceNames) -> Result<T, CallError>,
+        call: impl FnOnce(&Connection, u64, &ClientConfig, &ServiceNames, &mut Interrupt) -> Result<T, CallError>,
     ) -> Result<T, CallError> {
         let id = self.next_id;
         self.next_id = self.next_id.wrapping_add(1);
         let result = match self.ensure_connected(timeout) {
-            Ok(()) => call(self.conn.as_deref().expect("connected above"), id, &self.config, &self.names),
+            Ok(()) => {
+                call(self.conn.as_deref().expect("connected above"), id, &self.config, &self.names, &mut self.interrupt)
+            }
             Err(e) => Err(CallError::Connect(e)),
         };
         if matches!(result, Err(CallError::DaemonGone | CallError::NoDaemon { .. } | CallError::Ipc(_))) {
@@ -345,7 +384,7 @@ impl Client {
                 ),
             )));
         }
-        self.with_connection(timeout, |conn, id, config, names| {
+        self.with_connection(timeout, |conn, id, config, names, interrupt| {
             let header = request.header(mode, id, conn.reply_to);
             let mut loan = conn.rendezvous.loan_slice_uninit(records.len()).map_err(ipc)?;
             *loan.user_header_mut() = header;
@@ -356,6 +395,7 @@ impl Client {
             conn.await_reply(
                 config.spin,
                 timeout,
+                interrupt,
                 || Ok(pending.receive().map_err(ipc)?.map(|r| *r.payload()).filter(|r| r.request_id == id)),
                 || pending.is_connected(),
             )
@@ -397,7 +437,7 @@ impl Client {
                 ),
             )));
         }
-        let (reply, records) = self.with_connection(timeout, |conn, id, config, names| {
+        let (reply, records) = self.with_connection(timeout, |conn, id, config, names, interrupt| {
             let header = request.header(id, conn.reply_to);
             let mut loan = conn.map.loan_slice_uninit(records.len()).map_err(ipc)?;
             *loan.user_header_mut() = header;
@@ -408,6 +448,7 @@ impl Client {
             conn.await_reply(
                 config.spin,
                 timeout,
+                interrupt,
                 || {
                     let Some(r) = pending.receive().map_err(ipc)? else { return Ok(None) };
                     let header = *r.user_header();
@@ -584,7 +625,7 @@ impl Client {
 
     /// The daemon's health and counters.
     pub fn stats(&mut self, timeout: Duration) -> Result<DaemonStats, StatsRequestError> {
-        let reply = self.with_connection(timeout, |conn, id, config, names| {
+        let reply = self.with_connection(timeout, |conn, id, config, names, interrupt| {
             let request = StatsRequest { request_id: id, reply_to: conn.reply_to };
             let pending = conn.stats.send_copy(request).map_err(ipc)?;
             if pending.number_of_server_connections() == 0 {
@@ -593,6 +634,7 @@ impl Client {
             conn.await_reply(
                 config.spin,
                 timeout,
+                interrupt,
                 || Ok(pending.receive().map_err(ipc)?.map(|r| *r.payload()).filter(|r| r.request_id == id)),
                 || pending.is_connected(),
             )

@@ -49,6 +49,7 @@ pub(crate) enum CallError {
     Rejected(Rejection),
     Local(Rejection),
     Ipc(String),
+    Interrupted,
 }
 
 impl From<ClientOpenError> for CallError {
@@ -88,6 +89,11 @@ macro_rules! request_error {
             /// Any other iceoryx2 failure.
             #[error("iceoryx2: {0}")]
             Ipc(String),
+            /// The caller's interrupt check ended the wait
+            /// ([`Client::set_interrupt_check`](crate::Client::set_interrupt_check)):
+            /// no answer; a running search is abandoned.
+            #[error("the {what} request was interrupted by the caller (e.g. Ctrl-C) before its reply", what = $what)]
+            Interrupted,
         }
 
         impl $name {
@@ -131,6 +137,7 @@ macro_rules! request_error {
                     CallError::Rejected(r) => $name::Rejected(r),
                     CallError::Local(r) => $name::Invalid(r),
                     CallError::Ipc(s) => $name::Ipc(s),
+                    CallError::Interrupted => $name::Interrupted,
                 }
             }
         }

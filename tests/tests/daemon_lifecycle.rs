@@ -4,6 +4,7 @@ use dyfos_client::prelude::*;
 use dyfos_shared::answer::StopReason;
 use dyfos_shared::world::VerticalCylinder;
 use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, bin, data, signal, wait_for, without_micros};
+use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -307,4 +308,36 @@ fn a_stopped_and_continued_daemon_keeps_serving_and_sigint_stops_it() {
     assert!(daemon.stop_with("INT").success(), "{}", daemon.log());
     assert!(daemon.log().contains("dyfosd stopped"), "{}", daemon.log());
     assert_eq!(sandbox.shm_leftovers(), Vec::<String>::new());
+}
+
+/// A client stopped and continued while it waits for its answer still gets it: the
+/// interrupted wait goes on (`dyfos query` sets no interrupt check). Regression: the
+/// query failed with `iceoryx2: InterruptSignal`.
+#[test]
+fn a_client_stopped_and_continued_mid_query_still_gets_its_answer() {
+    let sandbox = Sandbox::new("client-stop-cont");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut admin = sandbox.client();
+    let file = sandbox.state_dir.with_extension("slow.json");
+    std::fs::write(&file, dyfos_tests::slow_search_scenario().to_json()).unwrap();
+    // A search that ends at its deadline, so the client waits that long.
+    let child = sandbox
+        .dyfos("query")
+        .arg(&file)
+        .args(["--algo", "brute", "--deadline-ms", "1500"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut child = ChildGuard(child);
+    wait_for("the query to run", || (admin.stats(PATIENCE).unwrap().running == 1).then_some(()));
+    stop_and_continue(child.0.id(), Duration::from_millis(50));
+    let (mut stdout, mut stderr) = (String::new(), String::new());
+    child.0.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
+    child.0.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
+    let status = child.0.wait().unwrap();
+    let _ = std::fs::remove_file(&file);
+    assert!(status.success(), "{stderr}");
+    let answer: serde_json::Value = serde_json::from_str(&stdout).expect("the answer as JSON");
+    assert_eq!(answer["stop"], "deadline", "{answer}");
 }

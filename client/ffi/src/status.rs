@@ -150,7 +150,8 @@ macro_rules! from_request_error {
                     $error::DaemonGone => Failure::new(DYFOS_STATUS_DAEMON_GONE, message),
                     $error::Timeout(_) => Failure::new(DYFOS_STATUS_TIMEOUT, message),
                     $error::Rejected(r) | $error::Invalid(r) => Failure::new(r.status as u32, message),
-                    $error::Ipc(_) => Failure::new(DYFOS_STATUS_IPC, message),
+                    // The C ABI sets no interrupt check, so `Interrupted` never comes.
+                    $error::Ipc(_) | $error::Interrupted => Failure::new(DYFOS_STATUS_IPC, message),
                 }
             }
         }

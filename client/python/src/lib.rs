@@ -23,7 +23,7 @@ use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyDict, PyList};
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 /// A failure on its way to Python: the wire status name (or a local one), the
@@ -85,6 +85,7 @@ macro_rules! request_error_info {
                     e @ $error::DaemonGone => ErrorInfo::new("daemon_gone", e),
                     e @ $error::Timeout(_) => ErrorInfo::new("timeout", e),
                     e @ $error::Ipc(_) => ErrorInfo::new("ipc_error", e),
+                    e @ $error::Interrupted => ErrorInfo::new("interrupted", e),
                 };
                 ErrorInfo { retryable, ..info }
             }
@@ -340,6 +341,9 @@ impl PyAnswer {
 struct PyClient {
     client: Mutex<Option<Client>>,
     timeout: Duration,
+    /// What a signal handler raised (`KeyboardInterrupt` on Ctrl-C) while a call
+    /// waited: the call ends and raises it.
+    raised: Arc<Mutex<Option<PyErr>>>,
 }
 
 impl PyClient {
@@ -355,12 +359,16 @@ impl PyClient {
             None => self.timeout,
             Some(t) => seconds("timeout", t).map_err(|e| to_pyerr(py, e))?,
         };
-        py.detach(|| {
+        let result = py.detach(|| {
             let mut guard = self.lock();
             let client = guard.as_mut().ok_or_else(closed)?;
             call(client, timeout).map_err(Into::into)
-        })
-        .map_err(|e| to_pyerr(py, e))
+        });
+        let raised = self.raised.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).take();
+        match (result, raised) {
+            (Err(_), Some(raised)) => Err(raised),
+            (result, _) => result.map_err(|e| to_pyerr(py, e)),
+        }
     }
 
     /// The client; a panic in an earlier call (a bug) does not lock it for good.
@@ -390,8 +398,22 @@ impl PyClient {
             (|| Ok((seconds("timeout", timeout)?, seconds("connect_timeout", connect_timeout)?)))()
                 .map_err(|e| to_pyerr(py, e))?;
         let config = ClientConfig { prefix, domain, connect_timeout, ..ClientConfig::default() };
-        let client = py.detach(|| Client::connect(&config)).map_err(|e| to_pyerr(py, e.into()))?;
-        Ok(PyClient { client: Mutex::new(Some(client)), timeout })
+        let mut client = py.detach(|| Client::connect(&config)).map_err(|e| to_pyerr(py, e.into()))?;
+        // Python's signal handlers run only when Python code runs: while a call waits
+        // (without the GIL) the client asks for them, so that Ctrl-C ends the call
+        // (PEP 475). `check_signals` does nothing off the main thread.
+        let raised = Arc::new(Mutex::new(None));
+        let slot = Arc::clone(&raised);
+        client.set_interrupt_check(Some(Box::new(move || {
+            Python::attach(|py| match py.check_signals() {
+                Ok(()) => false,
+                Err(e) => {
+                    *slot.lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = Some(e);
+                    true
+                }
+            })
+        })));
+        Ok(PyClient { client: Mutex::new(Some(client)), timeout, raised })
     }
 
     /// Closes the connection (idempotent); later calls raise `client_closed`.

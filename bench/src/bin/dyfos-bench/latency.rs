@@ -137,6 +137,7 @@ fn error_name(e: &RendezvousError) -> String {
         RendezvousError::DaemonGone => "daemon_gone".into(),
         RendezvousError::NoDaemon { .. } | RendezvousError::Connect(_) => "no_daemon".into(),
         RendezvousError::Ipc(_) => "ipc".into(),
+        RendezvousError::Interrupted => "interrupted".into(),
     }
 }
 
