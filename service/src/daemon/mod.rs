@@ -46,6 +46,7 @@
 //! daemon's next [`HOUSEKEEPING`], or sooner when any process of the domain creates
 //! a node.
 
+mod janitor;
 mod map;
 pub mod record;
 mod rendezvous;
@@ -391,6 +392,8 @@ pub struct Daemon {
     cores: dyfos_client::idle::IdleCores,
     /// The recorder's writer thread, if recording.
     recorder_thread: Option<JoinHandle<()>>,
+    /// The dead-process cleanup, off the IPC thread.
+    janitor: janitor::Janitor,
 }
 
 impl std::fmt::Debug for Daemon {
@@ -581,6 +584,8 @@ impl Daemon {
                 format!("a search yields its core to a waiting thread at most every {:?}", config.worker_yield)
             }
         );
+        let janitor = janitor::Janitor::start(&iox, HOUSEKEEPING)
+            .map_err(|e| DaemonCreateError::Ipc(format!("cannot start the cleanup thread: {e}")))?;
         let workers = (0..workers)
             .map(|i| {
                 let shared = Arc::clone(&shared);
@@ -630,6 +635,7 @@ impl Daemon {
             arrival_gap_us: f64::INFINITY,
             cores: dyfos_client::idle::IdleCores::new(cores),
             recorder_thread,
+            janitor,
         })
     }
 
@@ -687,6 +693,10 @@ impl Daemon {
         if self.last_housekeeping.elapsed() >= HOUSEKEEPING {
             self.housekeeping();
         }
+        if self.janitor.take_cleaned() {
+            // Dead clients' resources are gone: their running queries can be abandoned.
+            self.check_clients();
+        }
         if self.last_client_check.elapsed() >= CLIENT_CHECK {
             self.check_clients();
         }
@@ -722,15 +732,10 @@ impl Daemon {
         }
     }
 
+    /// The dead-node cleanup runs on the janitor's thread, not here.
     fn housekeeping(&mut self) {
         self.last_housekeeping = Instant::now();
         self.maps.expire_uploads();
-        let cleanup = self.node.try_cleanup_dead_nodes();
-        if cleanup.cleanups > 0 {
-            info!(cleaned = cleanup.cleanups, "removed resources of dead clients");
-            // Their running queries can be abandoned now.
-            self.check_clients();
-        }
     }
 
     /// What scheduling the IPC thread got at start.
