@@ -149,3 +149,29 @@ fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
         (s.queries_abandoned == 3 && s.running == 0).then_some(())
     });
 }
+
+/// The daemon cleans up after a killed client by itself (its janitor thread, every
+/// `HOUSEKEEPING`): with no other process of the domain starting meanwhile, the
+/// killed client's search is still abandoned. The admin client's requests here are
+/// answered at once, so its waits never run a cleanup either.
+#[test]
+fn the_daemon_cleans_up_after_a_killed_client_by_itself() {
+    let sandbox = Sandbox::new("abandon-janitor");
+    let (daemon, mut admin) = start(&sandbox);
+    let file = TempFile(sandbox.state_dir.with_extension("slow.json"));
+    std::fs::write(&file.0, Scenario { world: slow_world(), ..scenario() }.to_json()).unwrap();
+    let child = sandbox
+        .dyfos("query")
+        .arg(&file.0)
+        .args(["--algo", "brute"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut child = ChildGuard(child);
+    wait_for("the doomed brute query to run", || (admin.stats(PATIENCE).unwrap().running == 1).then_some(()));
+    signal(child.0.id(), "KILL");
+    let _ = child.0.wait();
+    wait_for("the orphaned search to be abandoned", || (abandoned(&mut admin) == 1).then_some(()));
+    assert!(daemon.log().contains("removed resources of dead clients"), "{}", daemon.log());
+}
