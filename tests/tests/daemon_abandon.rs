@@ -54,11 +54,10 @@ fn abandoned(admin: &mut Client) -> u64 {
     admin.stats(PATIENCE).unwrap().queries_abandoned
 }
 
-#[test]
-fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
-    let sandbox = Sandbox::new("abandon-kill");
-    let (daemon, mut admin) = start(&sandbox);
-    // `dyfos query` uploads the scenario's world itself, under an id of its own.
+/// Starts `dyfos query` on the slow scenario (a `brute` search) and waits until the
+/// daemon searches for it. `dyfos query` uploads the scenario's world itself, under
+/// an id of its own. The file is removed when the returned `TempFile` is dropped.
+fn start_doomed_query(sandbox: &Sandbox, admin: &mut Client) -> (ChildGuard, TempFile) {
     let file = TempFile(sandbox.state_dir.with_extension("slow.json"));
     std::fs::write(&file.0, Scenario { world: slow_world(), ..scenario() }.to_json()).unwrap();
     let child = sandbox
@@ -69,8 +68,16 @@ fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let mut child = ChildGuard(child);
+    let child = ChildGuard(child);
     wait_for("the doomed brute query to run", || (admin.stats(PATIENCE).unwrap().running == 1).then_some(()));
+    (child, file)
+}
+
+#[test]
+fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
+    let sandbox = Sandbox::new("abandon-kill");
+    let (daemon, mut admin) = start(&sandbox);
+    let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
     assert_eq!(abandoned(&mut admin), 0, "a search whose client is there goes on");
     signal(child.0.id(), "KILL");
     let _ = child.0.wait();
@@ -158,18 +165,7 @@ fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
 fn the_daemon_cleans_up_after_a_killed_client_by_itself() {
     let sandbox = Sandbox::new("abandon-janitor");
     let (daemon, mut admin) = start(&sandbox);
-    let file = TempFile(sandbox.state_dir.with_extension("slow.json"));
-    std::fs::write(&file.0, Scenario { world: slow_world(), ..scenario() }.to_json()).unwrap();
-    let child = sandbox
-        .dyfos("query")
-        .arg(&file.0)
-        .args(["--algo", "brute"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut child = ChildGuard(child);
-    wait_for("the doomed brute query to run", || (admin.stats(PATIENCE).unwrap().running == 1).then_some(()));
+    let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
     signal(child.0.id(), "KILL");
     let _ = child.0.wait();
     wait_for("the orphaned search to be abandoned", || (abandoned(&mut admin) == 1).then_some(()));
