@@ -83,6 +83,11 @@ pub struct LatencyArgs {
     /// `--compare-daemon-arg` daemon.
     #[arg(long)]
     skip_goals: bool,
+    /// Keep each client process's raw samples (JSON, one file per client and
+    /// configuration, numbered in the order they ran) in this directory, for
+    /// looking at a distribution beyond its percentiles.
+    #[arg(long)]
+    samples: Option<PathBuf>,
     /// Goals: seconds without traffic over which the daemon's idle CPU is measured.
     #[arg(allow_hyphen_values = true, long, default_value_t = 30.0)]
     idle_seconds: f64,
@@ -278,6 +283,8 @@ struct Bench<'a> {
     floor_service: String,
     /// The running daemon's process id (for its CPU time), 0 if none.
     daemon_pid: std::cell::Cell<u32>,
+    /// Configurations run so far (names the files of `--samples`).
+    configs_run: std::cell::Cell<usize>,
 }
 
 /// CPU time (user + system) of process `pid` so far, s; `None` if unreadable.
@@ -477,8 +484,19 @@ impl Bench<'_> {
             }
             let text = std::fs::read_to_string(out).with_context(|| format!("cannot read {}", out.display()))?;
             runs[*g].push(serde_json::from_str::<RunSamples>(&text).with_context(|| format!("{}", out.display()))?);
-            let _ = std::fs::remove_file(out);
+            match (&a.samples, out.file_name()) {
+                (Some(dir), Some(name)) => {
+                    let kept = dir.join(format!("{:03}-{}", self.configs_run.get(), name.to_string_lossy()));
+                    std::fs::rename(out, &kept)
+                        .or_else(|_| std::fs::copy(out, &kept).map(|_| ()))
+                        .with_context(|| format!("cannot keep the samples in {}", kept.display()))?;
+                }
+                _ => {
+                    let _ = std::fs::remove_file(out);
+                }
+            }
         }
+        self.configs_run.set(self.configs_run.get() + 1);
         let daemon_cpu = match (cpu_start, cpu_seconds(daemon)) {
             (Some(a), Some(b)) => Some((b - a) / wall_start.elapsed().as_secs_f64()),
             _ => None,
@@ -616,6 +634,9 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
         bail!("client counts must be at least 1");
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    if let Some(dir) = &args.samples {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
     let exe = std::env::current_exe().context("cannot find this executable")?;
     let dyfosd = match &args.dyfosd {
         Some(p) => p.clone(),
@@ -638,6 +659,7 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
         floor_service: format!("bench-latency-{pid}/floor"),
         tmp: tmp.clone(),
         daemon_pid: std::cell::Cell::new(0),
+        configs_run: std::cell::Cell::new(0),
     };
     let (load_before, machine_before) = (load_average(), MachineTicks::now());
     let result = run_with_daemon(&b, &dyfosd).and_then(|(mut report, rows, shutdown, idle)| {
