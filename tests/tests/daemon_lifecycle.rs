@@ -341,3 +341,37 @@ fn a_client_stopped_and_continued_mid_query_still_gets_its_answer() {
     let answer: serde_json::Value = serde_json::from_str(&stdout).expect("the answer as JSON");
     assert_eq!(answer["stop"], "deadline", "{answer}");
 }
+
+/// `Daemon::wait` says `Work` when a client's request wakes it, as `dyfosd`'s loop
+/// expects (it starts its polling window then). Regression: the wake-up was told
+/// apart by an iceoryx2 attachment id that holds the wait set's address, and the
+/// wait set moved into the daemon after attaching, so every wake-up read `Idle`.
+#[test]
+fn a_request_that_wakes_the_daemon_is_reported_as_work() {
+    use dyfos_service::daemon::{Daemon, DaemonConfig, WaitOutcome};
+    let sandbox = Sandbox::new("wait-work");
+    let config = DaemonConfig {
+        prefix: sandbox.prefix.clone(),
+        domain: Some(sandbox.domain.clone()),
+        state_dir: sandbox.state_dir.clone(),
+        // This test's thread is the IPC thread: keep it out of real-time scheduling.
+        ipc_priority: 0,
+        ..DaemonConfig::default()
+    };
+    let mut daemon = Daemon::create(&config).unwrap();
+    let config = sandbox.client_config();
+    let client = std::thread::spawn(move || {
+        let mut client = Client::connect(&config).unwrap();
+        // Long enough for the daemon to be asleep in its wait.
+        std::thread::sleep(Duration::from_millis(300));
+        client.stats(PATIENCE).map(|s| s.workers)
+    });
+    assert_eq!(daemon.wait(PATIENCE), WaitOutcome::Work);
+    // Answer until the client has its reply.
+    while !client.is_finished() {
+        daemon.spin();
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(client.join().unwrap().unwrap() >= 2);
+    daemon.shutdown();
+}

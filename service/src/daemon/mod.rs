@@ -68,7 +68,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::server::Server;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::{WaitSetAttachmentId, WaitSetRunResult};
+use iceoryx2::waitset::WaitSetRunResult;
 use std::path::PathBuf;
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
@@ -373,7 +373,6 @@ pub struct Daemon {
     wake: Listener<Ipc>,
     /// Where the IPC thread sleeps: on `wake`, attached once, and on SIGINT/SIGTERM.
     waitset: WaitSet<Ipc>,
-    wake_attachment: WaitSetAttachmentId<Ipc>,
     shared: Arc<Shared>,
     workers: Vec<JoinHandle<()>>,
     maps: map::Maps,
@@ -526,13 +525,10 @@ impl Daemon {
         // cloud VM, at real-time priority, on a core whose client may be waiting for
         // it to sleep again (bench/RESULTS.md, "The IPC thread's wake-up"). Forgetting
         // the guard only skips its detach: the wait set and the listener go together
-        // when the daemon is dropped.
-        let wake_attachment = {
-            let guard = waitset.attach_notification(&wake).map_err(ipc_err)?;
-            let id = WaitSetAttachmentId::from_guard(&guard);
-            std::mem::forget(guard);
-            id
-        };
+        // when the daemon is dropped. It is the wait set's only attachment, so any
+        // event it reports is a wake-up (an attachment id would not do: iceoryx2's
+        // ids hold the wait set's address, which changes when the daemon moves).
+        std::mem::forget(waitset.attach_notification(&wake).map_err(ipc_err)?);
 
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = if config.workers == 0 { cores } else { config.workers }.max(2);
@@ -622,7 +618,6 @@ impl Daemon {
             stats: stats_server,
             wake,
             waitset,
-            wake_attachment,
             shared,
             workers,
             maps,
@@ -789,10 +784,8 @@ impl Daemon {
         }
         let mut woke = false;
         let result = self.waitset.wait_and_process_once_with_timeout(
-            |id| {
-                if id == self.wake_attachment {
-                    woke = true;
-                }
+            |_| {
+                woke = true;
                 CallbackProgression::Continue
             },
             timeout,
