@@ -219,10 +219,13 @@ pub struct RunSamples {
 
 /// Waits until `target`: sleeps while it is far; spins for the last stretch (a
 /// sleep overshoots by tens of µs, which an open loop would charge as latency)
-/// only while a core is idle. When every core is taken, spinning would take CPU
-/// from the daemon under test, and a thread that has just spun is the one the
-/// scheduler lets wait longest; it then sleeps to the target (with a 1 ns timer
-/// slack, see [`precise_timers`]), as a robot's timed loop would.
+/// unless every core has been taken for a while ([`IdleCores::busy_lasting`]).
+/// When they are, spinning would take CPU from the daemon under test, and a thread
+/// that has just spun is the one the scheduler lets wait longest; it then sleeps to
+/// the target (with a 1 ns timer slack, see [`precise_timers`]), as a robot's
+/// timed loop would. Another sender spinning for a moment, or the daemon polling,
+/// is not such a load: sleeping for them made 27–32 % of the sparse run's sends
+/// 15–150 µs late (`bench/RESULTS.md`, "Polling stops for a load that lasts").
 fn wait_until(target: Instant, cores: &IdleCores) {
     const SPIN: Duration = Duration::from_micros(150);
     loop {
@@ -231,7 +234,7 @@ fn wait_until(target: Instant, cores: &IdleCores) {
             return;
         }
         let left = target - now;
-        if cores.busy() {
+        if cores.busy_lasting() {
             std::thread::sleep(left);
         } else if left > SPIN {
             std::thread::sleep(left - SPIN);

@@ -228,7 +228,11 @@ impl Connection {
                 // (the workers search, other clients wait), a thread that yields
                 // stays runnable and delays whoever wakes next, e.g. another
                 // process's cheap request, by a time slice; sleeping on the reply
-                // event costs this wait a wake-up instead.
+                // event costs this wait a wake-up instead. This asks about the
+                // moment, not a load that lasts (`busy_lasting`): a wait looks too
+                // seldom to tell them apart, and yielding beside searches doubled
+                // the p99 of cheap requests (`bench/RESULTS.md`, "Polling stops for
+                // a load that lasts").
                 std::thread::yield_now();
                 continue;
             }

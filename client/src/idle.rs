@@ -4,6 +4,14 @@
 //! thread in the scheduler's queue and delays whoever wakes next, often a robot
 //! process with a cheap request (`bench/RESULTS.md`, "Cheap requests while searches
 //! run"); sleeping on an event costs that one wait a wake-up (50–100 µs) instead.
+//!
+//! Two questions: [`IdleCores::busy`], whether every core is taken at this moment
+//! (a search asks it to make way for a thread that just woke), and
+//! [`IdleCores::busy_lasting`], whether they have been taken for a while (the
+//! pollers ask it before they stop polling). A client that spins 50 µs for its
+//! reply or a timer thread that runs for a moment fills a core too, but is gone
+//! before a poller that stopped for it would be woken again; searches and other
+//! processes' work last.
 
 use std::cell::Cell;
 use std::time::{Duration, Instant};
@@ -18,11 +26,23 @@ pub struct IdleCores {
     cores: usize,
     checked: Cell<Option<Instant>>,
     busy: Cell<bool>,
+    /// The first of the looks, up to the last, that all said busy; `None` once one
+    /// said idle.
+    busy_since: Cell<Option<Instant>>,
 }
 
 impl IdleCores {
     /// How long a look-up is trusted.
     pub const EVERY: Duration = Duration::from_micros(100);
+
+    /// How long every look must have said busy for [`IdleCores::busy_lasting`]:
+    /// longer than a client's spin for its reply (50 µs) or a timed sender's spin
+    /// before its send (150 µs in `dyfos-bench latency`), short next to a search
+    /// (0.5 ms and more) or a process that computes.
+    pub const LASTING: Duration = Duration::from_micros(300);
+
+    /// Looks further apart than this leave a gap in which the load is unknown.
+    const GAP: Duration = Duration::from_micros(250);
 
     /// For a machine with `cores` cores.
     pub fn new(cores: usize) -> Self {
@@ -31,6 +51,7 @@ impl IdleCores {
             cores,
             checked: Cell::new(None),
             busy: Cell::new(false),
+            busy_since: Cell::new(None),
         }
     }
 
@@ -42,13 +63,41 @@ impl IdleCores {
     /// Whether other runnable threads than the caller fill every core (false when
     /// unknown).
     pub fn busy(&self) -> bool {
-        if self.checked.get().is_some_and(|t| t.elapsed() < Self::EVERY) {
+        let now = Instant::now();
+        if self.checked.get().is_some_and(|t| now - t < Self::EVERY) {
             return self.busy.get();
         }
-        self.checked.set(Some(Instant::now()));
         let busy = self.runnable().is_some_and(|n| n.saturating_sub(1) >= self.cores);
-        self.busy.set(busy);
+        self.record(busy, now);
         busy
+    }
+
+    /// Whether other runnable threads fill every core now and every look since at
+    /// least [`IdleCores::LASTING`] ago said so: a load that lasts, not a thread
+    /// that runs for a moment. It looks only when asked: over a gap between looks
+    /// (the caller slept), a load that had lasted before it is taken to have gone
+    /// on, and a busy moment starts over.
+    pub fn busy_lasting(&self) -> bool {
+        self.busy() && self.lasting_at(Instant::now())
+    }
+
+    fn record(&self, busy: bool, at: Instant) {
+        let last = self.checked.replace(Some(at));
+        self.busy.set(busy);
+        let since = match (busy, self.busy_since.get(), last) {
+            (false, _, _) => None,
+            // Looks close together, all busy: the load goes on.
+            (true, Some(since), Some(last)) if at.saturating_duration_since(last) <= Self::GAP => Some(since),
+            // A gap since the last look (the caller slept): a load that had lasted
+            // before it is taken to go on; a busy moment is not.
+            (true, Some(since), Some(last)) if last.saturating_duration_since(since) >= Self::LASTING => Some(since),
+            (true, _, _) => Some(at),
+        };
+        self.busy_since.set(since);
+    }
+
+    fn lasting_at(&self, now: Instant) -> bool {
+        self.busy_since.get().is_some_and(|since| now.saturating_duration_since(since) >= Self::LASTING)
     }
 
     /// Runnable threads now, the caller included: `/proc/loadavg`'s fourth field
@@ -84,8 +133,47 @@ mod tests {
     }
 
     #[test]
+    fn a_load_lasts_only_while_every_look_says_busy() {
+        let cores = IdleCores::new(2);
+        let t = Instant::now();
+        let at = |us: u64| t + Duration::from_micros(us);
+        cores.record(true, at(0));
+        assert!(!cores.lasting_at(at(100)), "busy for 100 µs is a moment");
+        cores.record(true, at(200));
+        assert!(!cores.lasting_at(at(299)));
+        assert!(cores.lasting_at(at(300)), "busy at every look for 300 µs lasts");
+        cores.record(false, at(400));
+        assert!(!cores.lasting_at(at(5_000)), "one idle look ends it");
+        cores.record(true, at(5_000));
+        assert!(!cores.lasting_at(at(5_100)), "a new load starts from its first look");
+        assert!(cores.lasting_at(at(5_300)));
+    }
+
+    #[test]
+    fn over_a_gap_between_looks_a_lasting_load_goes_on_and_a_moment_does_not() {
+        let cores = IdleCores::new(2);
+        let t = Instant::now();
+        let at = |us: u64| t + Duration::from_micros(us);
+        // Busy at 0 and 100 µs, then the caller sleeps 4 ms: a moment, not a load.
+        cores.record(true, at(0));
+        cores.record(true, at(100));
+        cores.record(true, at(4_100));
+        assert!(!cores.lasting_at(at(4_100)), "two busy looks 4 ms apart are not 4 ms of load");
+        assert!(!cores.lasting_at(at(4_300)));
+        // Busy at every look from 4.1 to 4.5 ms: a load; after the next sleep it goes on.
+        for us in [4_200, 4_300, 4_400, 4_500] {
+            cores.record(true, at(us));
+        }
+        assert!(cores.lasting_at(at(4_500)));
+        cores.record(true, at(9_000));
+        assert!(cores.lasting_at(at(9_000)), "a load that had lasted is taken to go on over the gap");
+    }
+
+    #[test]
     fn a_machine_with_more_cores_than_threads_is_not_busy() {
         // Nothing runs a million threads: if /proc/loadavg is there, it says "idle".
-        assert!(!IdleCores::new(1_000_000).busy());
+        let cores = IdleCores::new(1_000_000);
+        assert!(!cores.busy());
+        assert!(!cores.busy_lasting());
     }
 }

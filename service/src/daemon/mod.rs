@@ -386,7 +386,7 @@ pub struct Daemon {
     /// exponentially weighted), which sizes the polling window.
     last_arrival: Instant,
     arrival_gap_us: f64,
-    /// Whether every core is taken, looked up at most every
+    /// Whether other work fills every core (and has for a while), looked up at most every
     /// [`IdleCores::EVERY`](dyfos_client::idle::IdleCores::EVERY).
     cores: dyfos_client::idle::IdleCores,
     /// The recorder's writer thread, if recording.
@@ -741,9 +741,14 @@ impl Daemon {
     /// How long the IPC thread should keep polling after the last request before
     /// it sleeps: [`DaemonConfig::spin_max`] while requests arrive about that often,
     /// else [`DaemonConfig::spin`]. Unless real-time scheduling is off, zero while
-    /// every worker searches or no core is idle: a polling thread that yields waits
-    /// a whole time slice behind the busy ones, where a sleeping one is woken ahead
-    /// of them (real-time, or above the niced workers). A non-zero window returns
+    /// every worker searches or other threads have filled every core for a while
+    /// ([`IdleCores::LASTING`](dyfos_client::idle::IdleCores::LASTING)): a polling
+    /// thread that yields waits a whole time slice behind the busy ones, where a
+    /// sleeping one is woken ahead of them (real-time, or above the niced workers).
+    /// A client that spins a moment for its reply does not end the poll: stopping
+    /// for it cost the next request a wake-up (in 16–20 % of the requests at
+    /// 1 000/s, `bench/RESULTS.md`, "Polling stops for a load that lasts"). A
+    /// non-zero window returns
     /// the thread to normal priority first, so its polling yields to every other
     /// thread.
     pub fn poll_window(&mut self) -> Duration {
@@ -753,7 +758,7 @@ impl Daemon {
         if window.is_zero() || self.ipc_scheduling == IpcScheduling::Off {
             return window;
         }
-        if self.shared.queue.lock().map_or(0, |q| q.active()) >= self.shared.threads || self.cores.busy() {
+        if self.shared.queue.lock().map_or(0, |q| q.active()) >= self.shared.threads || self.cores.busy_lasting() {
             return Duration::ZERO;
         }
         self.priority.lower();
