@@ -236,8 +236,10 @@ fn wait_until(target: Instant, cores: &IdleCores) {
         let left = target - now;
         if cores.busy_lasting() {
             std::thread::sleep(left);
+            cores.slept();
         } else if left > SPIN {
             std::thread::sleep(left - SPIN);
+            cores.slept();
         } else {
             std::hint::spin_loop();
         }

@@ -41,9 +41,6 @@ impl IdleCores {
     /// (0.5 ms and more) or a process that computes.
     pub const LASTING: Duration = Duration::from_micros(300);
 
-    /// Looks further apart than this leave a gap in which the load is unknown.
-    const GAP: Duration = Duration::from_micros(250);
-
     /// For a machine with `cores` cores.
     pub fn new(cores: usize) -> Self {
         IdleCores {
@@ -74,26 +71,32 @@ impl IdleCores {
 
     /// Whether other runnable threads fill every core now and every look since at
     /// least [`IdleCores::LASTING`] ago said so: a load that lasts, not a thread
-    /// that runs for a moment. It looks only when asked: over a gap between looks
-    /// (the caller slept), a load that had lasted before it is taken to have gone
-    /// on, and a busy moment starts over.
+    /// that runs for a moment. A caller kept off the CPU between two looks (it
+    /// yielded, and others ran) saw the load go on; one that slept says so with
+    /// [`IdleCores::slept`].
     pub fn busy_lasting(&self) -> bool {
         self.busy() && self.lasting_at(Instant::now())
     }
 
+    /// Tells that the caller slept since its last look: a busy moment seen before
+    /// says nothing of the time since and starts over at the next look; a load that
+    /// had lasted is taken to go on.
+    pub fn slept(&self) {
+        if let (Some(since), Some(last)) = (self.busy_since.get(), self.checked.get())
+            && last.saturating_duration_since(since) < Self::LASTING
+        {
+            self.busy_since.set(None);
+        }
+    }
+
     fn record(&self, busy: bool, at: Instant) {
-        let last = self.checked.replace(Some(at));
+        self.checked.set(Some(at));
         self.busy.set(busy);
-        let since = match (busy, self.busy_since.get(), last) {
-            (false, _, _) => None,
-            // Looks close together, all busy: the load goes on.
-            (true, Some(since), Some(last)) if at.saturating_duration_since(last) <= Self::GAP => Some(since),
-            // A gap since the last look (the caller slept): a load that had lasted
-            // before it is taken to go on; a busy moment is not.
-            (true, Some(since), Some(last)) if last.saturating_duration_since(since) >= Self::LASTING => Some(since),
-            (true, _, _) => Some(at),
-        };
-        self.busy_since.set(since);
+        match (busy, self.busy_since.get()) {
+            (false, _) => self.busy_since.set(None),
+            (true, None) => self.busy_since.set(Some(at)),
+            (true, Some(_)) => {}
+        }
     }
 
     fn lasting_at(&self, now: Instant) -> bool {
@@ -150,23 +153,34 @@ mod tests {
     }
 
     #[test]
-    fn over_a_gap_between_looks_a_lasting_load_goes_on_and_a_moment_does_not() {
+    fn after_a_sleep_a_lasting_load_goes_on_and_a_moment_does_not() {
         let cores = IdleCores::new(2);
         let t = Instant::now();
         let at = |us: u64| t + Duration::from_micros(us);
         // Busy at 0 and 100 µs, then the caller sleeps 4 ms: a moment, not a load.
         cores.record(true, at(0));
         cores.record(true, at(100));
+        cores.slept();
         cores.record(true, at(4_100));
         assert!(!cores.lasting_at(at(4_100)), "two busy looks 4 ms apart are not 4 ms of load");
         assert!(!cores.lasting_at(at(4_300)));
-        // Busy at every look from 4.1 to 4.5 ms: a load; after the next sleep it goes on.
-        for us in [4_200, 4_300, 4_400, 4_500] {
-            cores.record(true, at(us));
-        }
-        assert!(cores.lasting_at(at(4_500)));
+        assert!(cores.lasting_at(at(4_400)), "busy at every look since 4.1 ms");
+        // Busy at every look from 4.1 to 4.5 ms: a load; over the next sleep it goes on.
+        cores.record(true, at(4_500));
+        cores.slept();
         cores.record(true, at(9_000));
-        assert!(cores.lasting_at(at(9_000)), "a load that had lasted is taken to go on over the gap");
+        assert!(cores.lasting_at(at(9_000)), "a load that had lasted is taken to go on over the sleep");
+    }
+
+    #[test]
+    fn a_caller_kept_off_the_cpu_between_looks_saw_the_load_go_on() {
+        let cores = IdleCores::new(2);
+        let t = Instant::now();
+        let at = |us: u64| t + Duration::from_micros(us);
+        // A poller that yielded at 0 µs and ran again 2 ms later: others had the cores.
+        cores.record(true, at(0));
+        cores.record(true, at(2_000));
+        assert!(cores.lasting_at(at(2_000)));
     }
 
     #[test]

@@ -795,6 +795,7 @@ impl Daemon {
             },
             timeout,
         );
+        self.cores.slept();
         match result {
             Ok(WaitSetRunResult::TerminationRequest) => WaitOutcome::Terminate,
             // Any signal that interrupts the wait ends up here, not only SIGINT: the
