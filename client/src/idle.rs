@@ -135,11 +135,15 @@ mod tests {
         assert_eq!(runnable_of(b"a b c x/467 1"), None);
     }
 
+    /// An `IdleCores` of 2 cores and a clock in µs from now, to feed it looks.
+    fn looks() -> (IdleCores, impl Fn(u64) -> Instant) {
+        let t = Instant::now();
+        (IdleCores::new(2), move |us| t + Duration::from_micros(us))
+    }
+
     #[test]
     fn a_load_lasts_only_while_every_look_says_busy() {
-        let cores = IdleCores::new(2);
-        let t = Instant::now();
-        let at = |us: u64| t + Duration::from_micros(us);
+        let (cores, at) = looks();
         cores.record(true, at(0));
         assert!(!cores.lasting_at(at(100)), "busy for 100 µs is a moment");
         cores.record(true, at(200));
@@ -154,9 +158,7 @@ mod tests {
 
     #[test]
     fn after_a_sleep_a_lasting_load_goes_on_and_a_moment_does_not() {
-        let cores = IdleCores::new(2);
-        let t = Instant::now();
-        let at = |us: u64| t + Duration::from_micros(us);
+        let (cores, at) = looks();
         // Busy at 0 and 100 µs, then the caller sleeps 4 ms: a moment, not a load.
         cores.record(true, at(0));
         cores.record(true, at(100));
@@ -174,9 +176,7 @@ mod tests {
 
     #[test]
     fn a_caller_kept_off_the_cpu_between_looks_saw_the_load_go_on() {
-        let cores = IdleCores::new(2);
-        let t = Instant::now();
-        let at = |us: u64| t + Duration::from_micros(us);
+        let (cores, at) = looks();
         // A poller that yielded at 0 µs and ran again 2 ms later: others had the cores.
         cores.record(true, at(0));
         cores.record(true, at(2_000));

@@ -72,7 +72,7 @@ struct Cli {
     #[arg(long)]
     worker_batch: bool,
     /// How often, at most, a running search yields its core to a thread waiting for
-    /// one, µs (default 200; 0: never). Only while more threads are runnable than
+    /// one, µs (default 50; 0: never). Only while more threads are runnable than
     /// there are cores: a request sent meanwhile then waits at most about this long
     /// for its process to run, not a scheduler tick.
     #[arg(long, value_name = "MICROS")]
@@ -277,7 +277,7 @@ mod tests {
         assert_eq!((d.ipc_priority, d.spin_max, d.fair_queue), (10, Duration::from_millis(2), true));
         let legacy = config(&cli(&["--legacy-scheduling"])).unwrap();
         assert_eq!((legacy.ipc_priority, legacy.spin_max, legacy.fair_queue), (0, Duration::ZERO, false));
-        assert_eq!((d.worker_yield, legacy.worker_yield), (Duration::from_micros(200), Duration::ZERO));
+        assert_eq!((d.worker_yield, legacy.worker_yield), (Duration::from_micros(50), Duration::ZERO));
         assert_eq!(config(&cli(&["--worker-yield-us", "0"])).unwrap().worker_yield, Duration::ZERO);
         assert!(config(&cli(&["--worker-yield-us", "2000000"])).is_err());
         let mixed = config(&cli(&["--legacy-scheduling", "--queue", "fair", "--ipc-priority", "3"])).unwrap();
