@@ -60,7 +60,10 @@ impl IdleCores {
     /// Whether other runnable threads than the caller fill every core (false when
     /// unknown).
     pub fn busy(&self) -> bool {
-        let now = Instant::now();
+        self.busy_at(Instant::now())
+    }
+
+    fn busy_at(&self, now: Instant) -> bool {
         if self.checked.get().is_some_and(|t| now - t < Self::EVERY) {
             return self.busy.get();
         }
@@ -75,7 +78,8 @@ impl IdleCores {
     /// yielded, and others ran) saw the load go on; one that slept says so with
     /// [`IdleCores::slept`].
     pub fn busy_lasting(&self) -> bool {
-        self.busy() && self.lasting_at(Instant::now())
+        let now = Instant::now();
+        self.busy_at(now) && self.lasting_at(now)
     }
 
     /// Tells that the caller slept since its last look: a busy moment seen before

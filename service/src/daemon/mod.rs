@@ -390,8 +390,8 @@ pub struct Daemon {
     /// exponentially weighted), which sizes the polling window.
     last_arrival: Instant,
     arrival_gap_us: f64,
-    /// Whether other work fills every core (and has for a while), looked up at most every
-    /// [`IdleCores::EVERY`](dyfos_client::idle::IdleCores::EVERY).
+    /// Whether other work fills every core (and has for a while), looked up at most
+    /// every [`IdleCores::EVERY`](dyfos_client::idle::IdleCores::EVERY).
     cores: dyfos_client::idle::IdleCores,
     /// The recorder's writer thread, if recording.
     recorder_thread: Option<JoinHandle<()>>,
@@ -750,11 +750,10 @@ impl Daemon {
     /// thread that yields waits a whole time slice behind the busy ones, where a
     /// sleeping one is woken ahead of them (real-time, or above the niced workers).
     /// A client that spins a moment for its reply does not end the poll: stopping
-    /// for it cost the next request a wake-up (in 16–20 % of the requests at
+    /// for it cost the next request a wake-up (in 14–21 % of the requests at
     /// 1 000/s, `bench/RESULTS.md`, "Polling stops for a load that lasts"). A
-    /// non-zero window returns
-    /// the thread to normal priority first, so its polling yields to every other
-    /// thread.
+    /// non-zero window returns the thread to normal priority first, so its polling
+    /// yields to every other thread.
     pub fn poll_window(&mut self) -> Duration {
         let base = self.config.spin;
         let steady = self.config.spin_max > base && self.arrival_gap_us <= self.config.spin_max.as_secs_f64() * 1e6;
