@@ -27,7 +27,8 @@ struct Cli {
     state_dir: Option<PathBuf>,
     /// TOML file with any of: prefix, state_dir, domain, workers, spin_us,
     /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s, model,
-    /// worker_nice, ipc_priority, spin_max_us, queue, worker_batch, record,
+    /// worker_nice, ipc_priority, spin_max_us, queue, worker_batch, worker_yield_us,
+    /// worker_slice_us, record,
     /// record_max_bytes, record_keep.
     #[arg(long)]
     config: Option<PathBuf>,
@@ -56,7 +57,8 @@ struct Cli {
     worker_nice: Option<u8>,
     /// SCHED_FIFO priority of the thread that answers requests while it sleeps,
     /// 1–99 (default 10), so a request preempts running searches; 0 turns it off.
-    /// Needs CAP_SYS_NICE or `ulimit -r`; refused, the workers are niced by 5.
+    /// Needs CAP_SYS_NICE or `ulimit -r`; refused, it asks for a 0.1 ms time slice
+    /// instead (Linux 6.12 and later), else the workers are niced by 5.
     #[arg(long, value_parser = clap::value_parser!(u8).range(0..=99))]
     ipc_priority: Option<u8>,
     /// Longest time to keep polling after a request while traffic is steady, µs
@@ -77,9 +79,15 @@ struct Cli {
     /// for its process to run, not a scheduler tick.
     #[arg(long, value_name = "MICROS")]
     worker_yield_us: Option<u64>,
+    /// Time slice the search workers ask for, µs (default 3000; 0: the kernel's;
+    /// else 100–100000). Longer than other threads' slices, so on Linux 6.12 and
+    /// later a thread that wakes where a search runs preempts it at once.
+    #[arg(long, value_name = "MICROS")]
+    worker_slice_us: Option<u64>,
     /// The scheduling of dyfosd before issue 15, for comparisons: no real-time IPC
     /// thread, a fixed --spin-us window, a FIFO queue, searches that never yield
-    /// (same as `--ipc-priority 0 --spin-max-us 0 --queue fifo --worker-yield-us 0`;
+    /// and keep the kernel's slice (same as `--ipc-priority 0 --spin-max-us 0
+    /// --queue fifo --worker-yield-us 0 --worker-slice-us 0`;
     /// those flags win if given too).
     #[arg(long)]
     legacy_scheduling: bool,
@@ -117,6 +125,7 @@ struct FileConfig {
     queue: Option<String>,
     worker_batch: Option<bool>,
     worker_yield_us: Option<u64>,
+    worker_slice_us: Option<u64>,
     record: Option<PathBuf>,
     record_max_bytes: Option<u64>,
     record_keep: Option<usize>,
@@ -169,6 +178,12 @@ fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
             Some(us) => Duration::from_micros(us),
             None if cli.legacy_scheduling => Duration::ZERO,
             None => d.worker_yield,
+        },
+        worker_slice: match cli.worker_slice_us.or(file.worker_slice_us) {
+            Some(us @ (0 | 100..=100_000)) => Duration::from_micros(us),
+            Some(us) => anyhow::bail!("worker_slice_us = {us} must be 0 (the kernel's) or 100–100000 (0.1–100 ms)"),
+            None if cli.legacy_scheduling => Duration::ZERO,
+            None => d.worker_slice,
         },
         record: match cli.record.clone().or(file.record) {
             None => None,
@@ -280,6 +295,10 @@ mod tests {
         assert_eq!((d.worker_yield, legacy.worker_yield), (Duration::from_micros(50), Duration::ZERO));
         assert_eq!(config(&cli(&["--worker-yield-us", "0"])).unwrap().worker_yield, Duration::ZERO);
         assert!(config(&cli(&["--worker-yield-us", "2000000"])).is_err());
+        assert_eq!((d.worker_slice, legacy.worker_slice), (Duration::from_millis(3), Duration::ZERO));
+        assert_eq!(config(&cli(&["--worker-slice-us", "0"])).unwrap().worker_slice, Duration::ZERO);
+        assert!(config(&cli(&["--worker-slice-us", "99"])).is_err());
+        assert!(config(&cli(&["--worker-slice-us", "100001"])).is_err());
         let mixed = config(&cli(&["--legacy-scheduling", "--queue", "fair", "--ipc-priority", "3"])).unwrap();
         assert_eq!((mixed.ipc_priority, mixed.fair_queue), (3, true));
         assert!(Cli::try_parse_from(["dyfosd", "--queue", "lifo"]).is_err());

@@ -55,7 +55,7 @@ mod stats;
 
 pub use record::RecordConfig;
 pub use rendezvous::answer_query;
-pub use sched::IpcScheduling;
+pub use sched::{IPC_SLICE, IpcScheduling};
 
 use crate::store::{Store, StoreOpenError};
 use dyfos_shared::limits::{MAX_MAPS, SNAPSHOT_PAGE_RECORDS};
@@ -128,8 +128,9 @@ pub struct DaemonConfig {
     /// `--ipc-priority`, default [`DEFAULT_IPC_PRIORITY`]; 0: never real-time). A
     /// request then wakes it ahead of any running search; it polls at normal
     /// priority. Needs `CAP_SYS_NICE` or an `RLIMIT_RTPRIO` of at least this; when
-    /// refused, the workers run [`FALLBACK_WORKER_NICE`] nice levels lower instead
-    /// (unless `worker_nice` is set).
+    /// refused, it asks for a short time slice instead ([`IPC_SLICE`], Linux 6.12
+    /// and later), and where the kernel takes none the workers run
+    /// [`FALLBACK_WORKER_NICE`] nice levels lower (unless `worker_nice` is set).
     pub ipc_priority: u8,
     /// Longest polling window (`--spin-max-us`, default 2 ms; 0: always `spin`):
     /// while requests arrive about this often or more, the IPC thread keeps polling
@@ -153,6 +154,12 @@ pub struct DaemonConfig {
     /// lately (so CPU hogs do not get its share). Linux only; elsewhere it never
     /// yields.
     pub worker_yield: Duration,
+    /// Time slice the search workers ask the kernel for (`--worker-slice-us`,
+    /// default [`DEFAULT_WORKER_SLICE`]; zero: the kernel's). Longer than a normal
+    /// thread's, so on Linux 6.12 and later any normal thread that wakes where a
+    /// search runs preempts it at once; the searches' share of the CPU is unchanged
+    /// (it follows the nice level, not the slice). Linux only.
+    pub worker_slice: Duration,
     /// Record the daemon's traffic to an MCAP file (`--record`; default off).
     pub record: Option<RecordConfig>,
 }
@@ -168,7 +175,13 @@ pub const DEFAULT_IPC_PRIORITY: u8 = 10;
 /// "Searches yield at every checkpoint").
 pub const DEFAULT_WORKER_YIELD: Duration = Duration::from_micros(50);
 
-/// Nice levels the workers drop when the IPC thread may not run real-time.
+/// The search workers' time slice by default: above the kernel's default slice
+/// for normal threads (0.7 ms × (1 + log2 of the cores, at most 8): 0.7–2.8 ms),
+/// so a thread that wakes beside a search has the shorter one and preempts it.
+pub const DEFAULT_WORKER_SLICE: Duration = Duration::from_millis(3);
+
+/// Nice levels the workers drop when the IPC thread may neither run real-time nor
+/// have a short time slice.
 pub const FALLBACK_WORKER_NICE: u8 = 5;
 
 /// `$XDG_STATE_HOME/dyfos`, else `~/.local/state/dyfos`, else `./dyfos-state`.
@@ -201,6 +214,7 @@ impl Default for DaemonConfig {
             fair_queue: true,
             worker_batch: false,
             worker_yield: DEFAULT_WORKER_YIELD,
+            worker_slice: DEFAULT_WORKER_SLICE,
             record: None,
         }
     }
@@ -271,6 +285,7 @@ fn config_json(c: &DaemonConfig, threads: usize) -> serde_json::Value {
         "queue": if c.fair_queue { "fair" } else { "fifo" },
         "worker_batch": c.worker_batch,
         "worker_yield_us": u64::try_from(c.worker_yield.as_micros()).unwrap_or(u64::MAX),
+        "worker_slice_us": u64::try_from(c.worker_slice.as_micros()).unwrap_or(u64::MAX),
         "record": c.record.as_ref().map(|r| serde_json::json!({
             "path": r.path.display().to_string(), "max_bytes": r.max_bytes, "keep": r.keep, "queue": r.queue,
         })),
@@ -569,12 +584,14 @@ impl Daemon {
             (n, _) => n.min(19),
         };
         let worker_batch = config.worker_batch;
+        let worker_slice = config.worker_slice;
         info!(
             workers = threads,
             nice = worker_nice,
             policy = if worker_batch { "SCHED_BATCH" } else { "SCHED_OTHER" },
             fair_queue = config.fair_queue,
             yield_us = config.worker_yield.as_micros() as u64,
+            slice_us = worker_slice.as_micros() as u64,
             "search workers: {} nice level(s) below the IPC thread; queue served {}; {}",
             worker_nice,
             if config.fair_queue { "fairly across clients" } else { "first come, first served" },
@@ -594,6 +611,11 @@ impl Daemon {
                     .spawn(move || {
                         if worker_batch && let Err(e) = sched::set_batch() {
                             warn!("cannot make a search worker SCHED_BATCH ({e}); it stays SCHED_OTHER");
+                        }
+                        if !worker_slice.is_zero()
+                            && let Err(e) = sched::set_slice(worker_slice, worker_batch)
+                        {
+                            warn!("cannot set a search worker's time slice to {worker_slice:?} ({e}); it keeps the kernel's");
                         }
                         lower_priority(worker_nice);
                         rendezvous::worker(&shared, i)

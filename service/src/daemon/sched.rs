@@ -1,6 +1,9 @@
 //! Scheduling of the daemon's threads (issue 15): the IPC thread sleeps at a
 //! real-time priority, so a request that wakes it preempts running searches at once,
 //! and polls at normal priority, so its polling never takes a core from anything.
+//! Where real-time is refused it asks for a short time slice instead, and the search
+//! workers ask for a long one: Linux's EEVDF scheduler (6.12 on) lets a waking thread
+//! with a shorter slice than the running one preempt it.
 //!
 //! Linux only; elsewhere every call here does nothing. The libc calls are the only
 //! unsafe code of the daemon; each says why it is sound.
@@ -15,9 +18,19 @@ pub enum IpcScheduling {
     Realtime(u8),
     /// Real-time scheduling was turned off (`--ipc-priority 0`).
     Off,
-    /// The system refused real-time scheduling; the fallback is in effect.
+    /// The system refused real-time scheduling; the IPC thread asks for a short
+    /// time slice instead ([`IPC_SLICE`]), which the kernel took (Linux 6.12 and
+    /// later): a request still preempts a running search, no privilege needed.
+    ShortSlice,
+    /// The system refused real-time scheduling and a short slice; the fallback
+    /// (niced workers) is in effect.
     Refused,
 }
+
+/// The IPC thread's time slice when it may not run real-time: the shortest the
+/// kernel takes, so that it preempts a running search (whose slice is longer) at
+/// its wake-up, as a real-time thread would.
+pub const IPC_SLICE: Duration = Duration::from_micros(100);
 
 /// Switches the calling thread (the IPC thread) between `SCHED_FIFO` at a fixed
 /// priority and its normal policy. Both switches are one system call, made only
@@ -50,8 +63,15 @@ impl IpcPriority {
             }
             Err(e) => {
                 p.allowed = false;
+                let how = "it needs CAP_SYS_NICE (`setcap cap_sys_nice+ep dyfosd`) or an RLIMIT_RTPRIO";
+                if set_slice(IPC_SLICE, false).is_ok() && slice() == Some(IPC_SLICE) {
+                    warn!(
+                        "IPC thread: real-time priority {priority} refused ({e}): {how} of at least {priority} (`ulimit -r {priority}`); it runs at normal priority with a {IPC_SLICE:?} time slice instead, so a request still preempts a running search, though less surely (see README, daemon priorities)"
+                    );
+                    return (p, IpcScheduling::ShortSlice);
+                }
                 warn!(
-                    "IPC thread: real-time priority {priority} refused ({e}): it needs CAP_SYS_NICE (`setcap cap_sys_nice+ep dyfosd`) or an RLIMIT_RTPRIO of at least {priority} (`ulimit -r {priority}`); falling back to normal priority with the search workers niced (see README, daemon priorities)"
+                    "IPC thread: real-time priority {priority} refused ({e}): {how} of at least {priority} (`ulimit -r {priority}`); this kernel takes no time slice either (Linux 6.12 and later do), so the search workers are niced instead (see README, daemon priorities)"
                 );
                 (p, IpcScheduling::Refused)
             }
@@ -124,6 +144,73 @@ pub(crate) fn set_batch() -> std::io::Result<()> {
     if r == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
 }
 
+/// `sched_attr` as of Linux 4.x (`SCHED_ATTR_SIZE_VER0`, 48 bytes): libc does not
+/// define it.
+#[cfg(target_os = "linux")]
+#[repr(C)]
+struct SchedAttr {
+    size: u32,
+    sched_policy: u32,
+    sched_flags: u64,
+    sched_nice: i32,
+    sched_priority: u32,
+    sched_runtime: u64,
+    sched_deadline: u64,
+    sched_period: u64,
+}
+
+/// Asks the kernel for a time slice of `slice` for the calling thread (a search
+/// worker), keeping its policy (`SCHED_BATCH` if `batch`) and nice level. Its share
+/// of the CPU stays that of its nice level; what changes is who waits at a wake-up:
+/// EEVDF (Linux 6.12 on) lets a thread with a shorter slice preempt the running one
+/// at once, so any normal thread that wakes on a core where a search runs (a client
+/// with its reply, a robot process's timer) takes it then, not at the search's next
+/// checkpoint. Kernels before 6.12 take the call and ignore the slice.
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+pub(crate) fn set_slice(slice: Duration, batch: bool) -> std::io::Result<()> {
+    let tid = rustix::thread::gettid();
+    let nice = rustix::process::getpriority_process(Some(tid)).map_err(std::io::Error::from)?;
+    let attr = SchedAttr {
+        size: std::mem::size_of::<SchedAttr>() as u32,
+        sched_policy: if batch { libc::SCHED_BATCH } else { libc::SCHED_OTHER } as u32,
+        sched_flags: 0,
+        sched_nice: nice,
+        sched_priority: 0,
+        sched_runtime: u64::try_from(slice.as_nanos()).unwrap_or(u64::MAX),
+        sched_deadline: 0,
+        sched_period: 0,
+    };
+    // SAFETY: `attr` is a valid, initialized `sched_attr` (VER0 layout, its `size`
+    // says so) that outlives the call; pid 0 names the calling thread; flags 0. The
+    // kernel reads `attr` and nothing else.
+    let r = unsafe { libc::syscall(libc::SYS_sched_setattr, 0, &attr as *const SchedAttr, 0) };
+    if r == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
+}
+
+/// The calling thread's time slice as the kernel reports it: `None` where it
+/// reports none (before Linux 6.12, which also ignore a slice asked for).
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+pub(crate) fn slice() -> Option<Duration> {
+    let mut attr = SchedAttr {
+        size: 0,
+        sched_policy: 0,
+        sched_flags: 0,
+        sched_nice: 0,
+        sched_priority: 0,
+        sched_runtime: 0,
+        sched_deadline: 0,
+        sched_period: 0,
+    };
+    let size = std::mem::size_of::<SchedAttr>() as libc::c_uint;
+    // SAFETY: `attr` is a valid, writable `sched_attr` of `size` bytes (VER0 layout)
+    // that outlives the call; pid 0 names the calling thread; flags 0. The kernel
+    // writes at most `size` bytes of it.
+    let r = unsafe { libc::syscall(libc::SYS_sched_getattr, 0, &mut attr as *mut SchedAttr, size, 0) };
+    (r == 0 && attr.sched_runtime > 0).then(|| Duration::from_nanos(attr.sched_runtime))
+}
+
 /// CPU time the calling thread has used (zero if unknown).
 #[cfg(target_os = "linux")]
 #[allow(unsafe_code)]
@@ -155,6 +242,43 @@ fn set_normal() -> std::io::Result<()> {
 }
 
 #[cfg(not(target_os = "linux"))]
+pub(crate) fn set_slice(_slice: Duration, _batch: bool) -> std::io::Result<()> {
+    Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "time slices are set on Linux only"))
+}
+
+#[cfg(not(target_os = "linux"))]
+pub(crate) fn slice() -> Option<Duration> {
+    None
+}
+
+#[cfg(not(target_os = "linux"))]
 pub(crate) fn set_batch() -> std::io::Result<()> {
     Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "SCHED_BATCH is Linux only"))
+}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    use super::*;
+
+    /// A worker's slice is what it asked for, and asking keeps its nice level (the
+    /// call sets both, so a wrong nice would either fail unprivileged or change the
+    /// searches' share). Kernels that report no slice (before 6.12) ignore it.
+    #[test]
+    fn a_slice_asked_for_is_taken_and_keeps_the_nice_level() {
+        std::thread::spawn(|| {
+            if slice().is_none() {
+                eprintln!("this kernel reports no time slice; nothing to check");
+                return;
+            }
+            let tid = rustix::thread::gettid();
+            rustix::process::setpriority_process(Some(tid), 3).unwrap();
+            set_slice(Duration::from_millis(3), false).unwrap();
+            assert_eq!(slice(), Some(Duration::from_millis(3)));
+            assert_eq!(rustix::process::getpriority_process(Some(tid)).unwrap(), 3);
+            set_slice(IPC_SLICE, false).unwrap();
+            assert_eq!(slice(), Some(IPC_SLICE));
+        })
+        .join()
+        .unwrap();
+    }
 }

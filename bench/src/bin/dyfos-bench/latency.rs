@@ -71,7 +71,8 @@ pub struct LatencyArgs {
     /// flags (e.g. `--compare-daemon-arg=--worker-nice=10`), in the same run.
     #[arg(long = "compare-daemon-arg", value_name = "FLAG", allow_hyphen_values = true)]
     compare_daemon_args: Vec<String>,
-    /// Directory for the table (markdown), summary (JSON) and plots (SVG).
+    /// Directory for the table (markdown), summary (JSON) and plots (SVG); the
+    /// `--compare-daemon-arg` daemon's rows go to `latency-compare.json`.
     #[arg(long, default_value = "bench/out")]
     out: PathBuf,
     /// How long each client busy-polls for a reply before it sleeps on the reply
@@ -672,20 +673,20 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
         if !args.skip_goals {
             report.push_str(&goals(args, &rows, idle, compared.as_ref().map(|(r, i)| (r.as_slice(), *i))));
         }
-        let baseline = compared.as_ref().map_or(&[][..], |(r, _)| r.as_slice());
-        report.push_str(&steal_note(machine_before, &rows, baseline));
-        Ok((report, rows, shutdown))
+        let baseline = compared.map(|(r, _)| r).unwrap_or_default();
+        report.push_str(&steal_note(machine_before, &rows, &baseline));
+        Ok((report, rows, baseline, shutdown))
     });
     let left = shm_leftovers(&b.domain);
     let _ = std::fs::remove_dir_all(&tmp);
-    let (mut report, rows, shutdown) = result?;
+    let (mut report, rows, baseline, shutdown) = result?;
     let _ = writeln!(
         report,
         "\nLoad average (1 min) before and after the run: {load_before}, {}. Daemon shutdown: {shutdown}; shared-memory files left in /dev/shm: {}.",
         load_average(),
         if left.is_empty() { "none".to_string() } else { left.join(", ") }
     );
-    write_files(args, &report, &rows)?;
+    write_files(args, &report, &rows, &baseline)?;
     println!("{report}");
     Ok(())
 }
@@ -1254,19 +1255,9 @@ fn comparison(rows: &[Row], baselines: &[(Workload, Row)], in_daemon: Option<InD
     out
 }
 
-/// Reads one percentile of a [`Latencies`].
-type Percentile = fn(&Latencies) -> f64;
-
-fn write_files(args: &LatencyArgs, report: &str, rows: &[Row]) -> anyhow::Result<()> {
-    let write = |name: &str, text: &str| -> anyhow::Result<()> {
-        let path = args.out.join(name);
-        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
-        eprintln!("wrote {}", path.display());
-        Ok(())
-    };
-    write("latency.md", report)?;
-    let json: Vec<serde_json::Value> = rows
-        .iter()
+/// The rows as `latency.json` lists them.
+fn rows_json(rows: &[Row]) -> Vec<serde_json::Value> {
+    rows.iter()
         .map(|r| {
             let l = |l: Option<Latencies>| {
                 l.map(|l| {
@@ -1292,8 +1283,24 @@ fn write_files(args: &LatencyArgs, report: &str, rows: &[Row]) -> anyhow::Result
                 "host_steal": r.steal,
             })
         })
-        .collect();
-    write("latency.json", &serde_json::to_string_pretty(&json)?)?;
+        .collect()
+}
+
+/// Reads one percentile of a [`Latencies`].
+type Percentile = fn(&Latencies) -> f64;
+
+fn write_files(args: &LatencyArgs, report: &str, rows: &[Row], baseline: &[Row]) -> anyhow::Result<()> {
+    let write = |name: &str, text: &str| -> anyhow::Result<()> {
+        let path = args.out.join(name);
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+        Ok(())
+    };
+    write("latency.md", report)?;
+    write("latency.json", &serde_json::to_string_pretty(&rows_json(rows))?)?;
+    if !baseline.is_empty() {
+        write("latency-compare.json", &serde_json::to_string_pretty(&rows_json(baseline))?)?;
+    }
     for w in [Workload::Null, Workload::Dyfos] {
         let closed: Vec<&Row> = rows
             .iter()
