@@ -28,7 +28,7 @@ struct Cli {
     /// TOML file with any of: prefix, state_dir, domain, workers, spin_us,
     /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s, model,
     /// worker_nice, ipc_priority, spin_max_us, queue, worker_batch, worker_yield_us,
-    /// worker_slice_us, record,
+    /// worker_slice_us, cpu_latency_us, record,
     /// record_max_bytes, record_keep.
     #[arg(long)]
     config: Option<PathBuf>,
@@ -84,10 +84,16 @@ struct Cli {
     /// later a thread that wakes where a search runs preempts it at once.
     #[arg(long, value_name = "MICROS")]
     worker_slice_us: Option<u64>,
+    /// While requests arrive steadily, ask that idle cores wake within this many µs
+    /// (default 0: idle cores poll, a wake-up takes µs), until 50 ms after the last
+    /// request; `off` leaves the kernel's choice. Needs root (/dev/cpu_dma_latency).
+    #[arg(long, value_name = "MICROS|off", value_parser = parse_cpu_latency)]
+    cpu_latency_us: Option<CpuLatency>,
     /// The scheduling of dyfosd before issue 15, for comparisons: no real-time IPC
     /// thread, a fixed --spin-us window, a FIFO queue, searches that never yield
-    /// and keep the kernel's slice (same as `--ipc-priority 0 --spin-max-us 0
-    /// --queue fifo --worker-yield-us 0 --worker-slice-us 0`;
+    /// and keep the kernel's slice, idle cores as the kernel likes (same as
+    /// `--ipc-priority 0 --spin-max-us 0 --queue fifo --worker-yield-us 0
+    /// --worker-slice-us 0 --cpu-latency-us off`;
     /// those flags win if given too).
     #[arg(long)]
     legacy_scheduling: bool,
@@ -126,9 +132,33 @@ struct FileConfig {
     worker_batch: Option<bool>,
     worker_yield_us: Option<u64>,
     worker_slice_us: Option<u64>,
+    cpu_latency_us: Option<CpuLatency>,
     record: Option<PathBuf>,
     record_max_bytes: Option<u64>,
     record_keep: Option<usize>,
+}
+
+/// `cpu_latency_us`: µs, or `"off"`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(untagged)]
+enum CpuLatency {
+    Micros(u32),
+    #[serde(deserialize_with = "off")]
+    Off,
+}
+
+fn off<'de, D: serde::Deserializer<'de>>(d: D) -> Result<(), D::Error> {
+    match <String as serde::Deserialize>::deserialize(d)?.as_str() {
+        "off" => Ok(()),
+        other => Err(serde::de::Error::custom(format!("\"{other}\" is neither a number of µs nor \"off\""))),
+    }
+}
+
+fn parse_cpu_latency(s: &str) -> Result<CpuLatency, String> {
+    match s {
+        "off" => Ok(CpuLatency::Off),
+        n => n.parse().map(CpuLatency::Micros).map_err(|_| format!("{n} is neither a number of µs nor `off`")),
+    }
 }
 
 fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
@@ -184,6 +214,15 @@ fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
             Some(us) => anyhow::bail!("worker_slice_us = {us} must be 0 (the kernel's) or 100–100000 (0.1–100 ms)"),
             None if cli.legacy_scheduling => Duration::ZERO,
             None => d.worker_slice,
+        },
+        cpu_latency_us: match cli.cpu_latency_us.or(file.cpu_latency_us) {
+            Some(CpuLatency::Micros(us)) if us > 1_000_000 => {
+                anyhow::bail!("cpu_latency_us = {us} must be at most 1000000 (1 s), or \"off\"")
+            }
+            Some(CpuLatency::Micros(us)) => Some(us),
+            Some(CpuLatency::Off) => None,
+            None if cli.legacy_scheduling => None,
+            None => d.cpu_latency_us,
         },
         record: match cli.record.clone().or(file.record) {
             None => None,
@@ -299,6 +338,20 @@ mod tests {
         assert_eq!(config(&cli(&["--worker-slice-us", "0"])).unwrap().worker_slice, Duration::ZERO);
         assert!(config(&cli(&["--worker-slice-us", "99"])).is_err());
         assert!(config(&cli(&["--worker-slice-us", "100001"])).is_err());
+        assert_eq!((d.cpu_latency_us, legacy.cpu_latency_us), (Some(0), None));
+        assert_eq!(config(&cli(&["--cpu-latency-us", "off"])).unwrap().cpu_latency_us, None);
+        assert_eq!(config(&cli(&["--cpu-latency-us", "20"])).unwrap().cpu_latency_us, Some(20));
+        assert!(Cli::try_parse_from(["dyfosd", "--cpu-latency-us", "soon"]).is_err());
+        assert!(config(&cli(&["--cpu-latency-us", "1000001"])).is_err());
+        for (line, want) in [
+            ("cpu_latency_us = \"off\"", Ok(None)),
+            ("cpu_latency_us = 5", Ok(Some(5))),
+            ("cpu_latency_us = \"on\"", Err(())),
+        ] {
+            std::fs::write(&file, line).unwrap();
+            let got = config(&cli(&["--config", file.to_str().unwrap()])).map(|c| c.cpu_latency_us).map_err(|_| ());
+            assert_eq!(got, want, "{line}");
+        }
         let mixed = config(&cli(&["--legacy-scheduling", "--queue", "fair", "--ipc-priority", "3"])).unwrap();
         assert_eq!((mixed.ipc_priority, mixed.fair_queue), (3, true));
         assert!(Cli::try_parse_from(["dyfosd", "--queue", "lifo"]).is_err());

@@ -35,7 +35,13 @@
 //! grows to [`DaemonConfig::spin_max`] while traffic is steady and is zero while
 //! every worker searches. Real-time scheduling is per thread: call [`Daemon::spin`]
 //! and [`Daemon::wait`] on the thread that called [`Daemon::create`]. Where the
-//! system refuses it, the workers run [`FALLBACK_WORKER_NICE`] nice levels lower.
+//! system refuses it, the IPC thread asks for a short time slice ([`IPC_SLICE`])
+//! and, on kernels that ignore slices, the workers run [`FALLBACK_WORKER_NICE`]
+//! nice levels lower. The workers ask for a long slice
+//! ([`DaemonConfig::worker_slice`]), so any thread that wakes beside a search
+//! preempts it. While traffic is steady, idle cores are asked to poll
+//! ([`DaemonConfig::cpu_latency_us`]), so a request after a pause wakes the IPC
+//! thread in µs.
 //!
 //! A client that goes away mid-query (killed, or dropping its pending response)
 //! frees its worker: while searches run, the IPC thread looks every
@@ -46,6 +52,7 @@
 //! daemon's next [`HOUSEKEEPING`], or sooner when any process of the domain creates
 //! a node.
 
+mod cpu_latency;
 mod janitor;
 mod map;
 pub mod record;
@@ -160,6 +167,12 @@ pub struct DaemonConfig {
     /// search runs preempts it at once; the searches' share of the CPU is unchanged
     /// (it follows the nice level, not the slice). Linux only.
     pub worker_slice: Duration,
+    /// While requests arrive steadily, ask that idle cores wake within this many µs
+    /// (`--cpu-latency-us`, default 0: they poll; `None`: off), released 50 ms after
+    /// the last request. A request after a pause then finds the IPC thread's core
+    /// awake in µs, not the 40–75 µs a virtual machine's idle core takes. Needs
+    /// root (`/dev/cpu_dma_latency`); without, the daemon says so once and goes on.
+    pub cpu_latency_us: Option<u32>,
     /// Record the daemon's traffic to an MCAP file (`--record`; default off).
     pub record: Option<RecordConfig>,
 }
@@ -215,6 +228,7 @@ impl Default for DaemonConfig {
             worker_batch: false,
             worker_yield: DEFAULT_WORKER_YIELD,
             worker_slice: DEFAULT_WORKER_SLICE,
+            cpu_latency_us: Some(0),
             record: None,
         }
     }
@@ -286,6 +300,7 @@ fn config_json(c: &DaemonConfig, threads: usize) -> serde_json::Value {
         "worker_batch": c.worker_batch,
         "worker_yield_us": u64::try_from(c.worker_yield.as_micros()).unwrap_or(u64::MAX),
         "worker_slice_us": u64::try_from(c.worker_slice.as_micros()).unwrap_or(u64::MAX),
+        "cpu_latency_us": c.cpu_latency_us,
         "record": c.record.as_ref().map(|r| serde_json::json!({
             "path": r.path.display().to_string(), "max_bytes": r.max_bytes, "keep": r.keep, "queue": r.queue,
         })),
@@ -405,6 +420,8 @@ pub struct Daemon {
     /// exponentially weighted), which sizes the polling window.
     last_arrival: Instant,
     arrival_gap_us: f64,
+    /// The CPU latency request, held while traffic is steady.
+    cpu_latency: cpu_latency::CpuLatency,
     /// Whether other work fills every core (and has for a while), looked up at most
     /// every [`IdleCores::EVERY`](dyfos_client::idle::IdleCores::EVERY).
     cores: dyfos_client::idle::IdleCores,
@@ -654,6 +671,10 @@ impl Daemon {
             ipc_scheduling,
             last_arrival: Instant::now(),
             arrival_gap_us: f64::INFINITY,
+            cpu_latency: cpu_latency::CpuLatency::open(
+                config.cpu_latency_us,
+                std::path::Path::new(cpu_latency::CpuLatency::DEVICE),
+            ),
             cores: dyfos_client::idle::IdleCores::new(cores),
             recorder_thread,
             janitor,
@@ -710,6 +731,9 @@ impl Daemon {
             self.last_arrival = now;
             self.arrival_gap_us =
                 if self.arrival_gap_us.is_finite() { 0.875 * self.arrival_gap_us + 0.125 * gap } else { gap };
+            if self.steady() {
+                self.cpu_latency.hold();
+            }
         }
         if self.last_housekeeping.elapsed() >= HOUSEKEEPING {
             self.housekeeping();
@@ -777,9 +801,7 @@ impl Daemon {
     /// non-zero window returns the thread to normal priority first, so its polling
     /// yields to every other thread.
     pub fn poll_window(&mut self) -> Duration {
-        let base = self.config.spin;
-        let steady = self.config.spin_max > base && self.arrival_gap_us <= self.config.spin_max.as_secs_f64() * 1e6;
-        let window = if steady { self.config.spin_max } else { base };
+        let window = if self.steady() { self.config.spin_max } else { self.config.spin };
         if window.is_zero() || self.ipc_scheduling == IpcScheduling::Off {
             return window;
         }
@@ -793,6 +815,11 @@ impl Daemon {
         window
     }
 
+    /// Whether requests arrive about every [`DaemonConfig::spin_max`] or more often.
+    fn steady(&self) -> bool {
+        self.config.spin_max > self.config.spin && self.arrival_gap_us <= self.config.spin_max.as_secs_f64() * 1e6
+    }
+
     /// Whether SIGINT or SIGTERM arrived.
     pub fn termination_requested(&self) -> bool {
         self.node.wait(Duration::ZERO).is_err()
@@ -804,8 +831,12 @@ impl Daemon {
     /// clients go.
     pub fn wait(&mut self, timeout: Duration) -> WaitOutcome {
         self.priority.raise();
-        let timeout =
+        let mut timeout =
             if self.shared.queue.lock().map_or(0, |q| q.running()) > 0 { timeout.min(CLIENT_CHECK) } else { timeout };
+        // Traffic stopped: end the CPU latency request, or wake when it is due.
+        if let Some(left) = self.cpu_latency.release_if_quiet(self.last_arrival, Instant::now()) {
+            timeout = timeout.min(left);
+        }
         // Consume stale notifications first, then look once more: a request sent
         // before its notification was consumed is seen here, one sent after wakes us.
         let _ = self.wake.try_wait(|_| {});
