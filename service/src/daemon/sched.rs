@@ -144,6 +144,10 @@ pub(crate) fn set_batch() -> std::io::Result<()> {
     if r == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
 }
 
+/// `SCHED_FLAG_RESET_ON_FORK` of `sched_attr.sched_flags` (libc has no constant).
+#[cfg(target_os = "linux")]
+const SCHED_FLAG_RESET_ON_FORK: u64 = 0x01;
+
 /// `sched_attr` as of Linux 4.x (`SCHED_ATTR_SIZE_VER0`, 48 bytes): libc does not
 /// define it.
 #[cfg(target_os = "linux")]
@@ -174,7 +178,8 @@ pub(crate) fn set_slice(slice: Duration, batch: bool) -> std::io::Result<()> {
     let attr = SchedAttr {
         size: std::mem::size_of::<SchedAttr>() as u32,
         sched_policy: if batch { libc::SCHED_BATCH } else { libc::SCHED_OTHER } as u32,
-        sched_flags: 0,
+        // Threads it starts later get the kernel's slice, not this one.
+        sched_flags: SCHED_FLAG_RESET_ON_FORK,
         sched_nice: nice,
         sched_priority: 0,
         sched_runtime: u64::try_from(slice.as_nanos()).unwrap_or(u64::MAX),
@@ -182,8 +187,8 @@ pub(crate) fn set_slice(slice: Duration, batch: bool) -> std::io::Result<()> {
         sched_period: 0,
     };
     // SAFETY: `attr` is a valid, initialized `sched_attr` (VER0 layout, its `size`
-    // says so) that outlives the call; pid 0 names the calling thread; flags 0. The
-    // kernel reads `attr` and nothing else.
+    // says so) that outlives the call; pid 0 names the calling thread; the call's
+    // flags are 0. The kernel reads `attr` and nothing else.
     let r = unsafe { libc::syscall(libc::SYS_sched_setattr, 0, &attr as *const SchedAttr, 0) };
     if r == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
 }
@@ -277,6 +282,10 @@ mod tests {
             assert_eq!(rustix::process::getpriority_process(Some(tid)).unwrap(), 3);
             set_slice(IPC_SLICE, false).unwrap();
             assert_eq!(slice(), Some(IPC_SLICE));
+            // The IPC thread starts the workers and the cleanup thread after asking:
+            // they must not inherit its short slice.
+            let child = std::thread::spawn(slice).join().unwrap();
+            assert!(child.is_some_and(|c| c != IPC_SLICE), "{child:?}");
         })
         .join()
         .unwrap();
