@@ -630,7 +630,7 @@ impl Daemon {
                             warn!("cannot make a search worker SCHED_BATCH ({e}); it stays SCHED_OTHER");
                         }
                         if !worker_slice.is_zero()
-                            && let Err(e) = sched::set_slice(worker_slice, worker_batch)
+                            && let Err(e) = sched::set_slice(worker_slice)
                         {
                             warn!("cannot set a search worker's time slice to {worker_slice:?} ({e}); it keeps the kernel's");
                         }

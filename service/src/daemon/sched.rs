@@ -64,7 +64,7 @@ impl IpcPriority {
             Err(e) => {
                 p.allowed = false;
                 let how = "it needs CAP_SYS_NICE (`setcap cap_sys_nice+ep dyfosd`) or an RLIMIT_RTPRIO";
-                if set_slice(IPC_SLICE, false).is_ok() && slice() == Some(IPC_SLICE) {
+                if set_slice(IPC_SLICE).is_ok() && slice() == Some(IPC_SLICE) {
                     warn!(
                         "IPC thread: real-time priority {priority} refused ({e}): {how} of at least {priority} (`ulimit -r {priority}`); it runs at normal priority with a {IPC_SLICE:?} time slice instead, so a request still preempts a running search, though less surely (see README, daemon priorities)"
                     );
@@ -145,6 +145,8 @@ pub(crate) fn set_batch() -> std::io::Result<()> {
 }
 
 /// `SCHED_FLAG_RESET_ON_FORK` of `sched_attr.sched_flags` (libc has no constant).
+/// (`SCHED_FLAG_KEEP_POLICY` would spare reading the policy first, but the kernel
+/// then ignores this flag.)
 #[cfg(target_os = "linux")]
 const SCHED_FLAG_RESET_ON_FORK: u64 = 0x01;
 
@@ -152,6 +154,7 @@ const SCHED_FLAG_RESET_ON_FORK: u64 = 0x01;
 /// define it.
 #[cfg(target_os = "linux")]
 #[repr(C)]
+#[derive(Default)]
 struct SchedAttr {
     size: u32,
     sched_policy: u32,
@@ -163,28 +166,26 @@ struct SchedAttr {
     sched_period: u64,
 }
 
-/// Asks the kernel for a time slice of `slice` for the calling thread (a search
-/// worker), keeping its policy (`SCHED_BATCH` if `batch`) and nice level. Its share
-/// of the CPU stays that of its nice level; what changes is who waits at a wake-up:
-/// EEVDF (Linux 6.12 on) lets a thread with a shorter slice preempt the running one
-/// at once, so any normal thread that wakes on a core where a search runs (a client
+/// Asks the kernel for a time slice of `slice` for the calling thread, keeping its
+/// policy (`SCHED_OTHER` or `SCHED_BATCH`) and nice level. Its share of the CPU
+/// stays that of its nice level; what changes is who waits at a wake-up: EEVDF
+/// (Linux 6.12 on) lets a thread with a shorter slice preempt the running one at
+/// once, so any normal thread that wakes on a core where a search runs (a client
 /// with its reply, a robot process's timer) takes it then, not at the search's next
 /// checkpoint. Kernels before 6.12 take the call and ignore the slice.
 #[cfg(target_os = "linux")]
 #[allow(unsafe_code)]
-pub(crate) fn set_slice(slice: Duration, batch: bool) -> std::io::Result<()> {
-    let tid = rustix::thread::gettid();
-    let nice = rustix::process::getpriority_process(Some(tid)).map_err(std::io::Error::from)?;
+pub(crate) fn set_slice(slice: Duration) -> std::io::Result<()> {
+    // The call sets the policy and nice level too: pass the thread's own.
+    let now = attr()?;
     let attr = SchedAttr {
         size: std::mem::size_of::<SchedAttr>() as u32,
-        sched_policy: if batch { libc::SCHED_BATCH } else { libc::SCHED_OTHER } as u32,
+        sched_policy: now.sched_policy,
         // Threads it starts later get the kernel's slice, not this one.
         sched_flags: SCHED_FLAG_RESET_ON_FORK,
-        sched_nice: nice,
-        sched_priority: 0,
+        sched_nice: now.sched_nice,
         sched_runtime: u64::try_from(slice.as_nanos()).unwrap_or(u64::MAX),
-        sched_deadline: 0,
-        sched_period: 0,
+        ..SchedAttr::default()
     };
     // SAFETY: `attr` is a valid, initialized `sched_attr` (VER0 layout, its `size`
     // says so) that outlives the call; pid 0 names the calling thread; the call's
@@ -196,24 +197,21 @@ pub(crate) fn set_slice(slice: Duration, batch: bool) -> std::io::Result<()> {
 /// The calling thread's time slice as the kernel reports it: `None` where it
 /// reports none (before Linux 6.12, which also ignore a slice asked for).
 #[cfg(target_os = "linux")]
-#[allow(unsafe_code)]
 pub(crate) fn slice() -> Option<Duration> {
-    let mut attr = SchedAttr {
-        size: 0,
-        sched_policy: 0,
-        sched_flags: 0,
-        sched_nice: 0,
-        sched_priority: 0,
-        sched_runtime: 0,
-        sched_deadline: 0,
-        sched_period: 0,
-    };
+    attr().ok().filter(|a| a.sched_runtime > 0).map(|a| Duration::from_nanos(a.sched_runtime))
+}
+
+/// The calling thread's scheduling attributes (`sched_getattr`).
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+fn attr() -> std::io::Result<SchedAttr> {
+    let mut attr = SchedAttr::default();
     let size = std::mem::size_of::<SchedAttr>() as libc::c_uint;
     // SAFETY: `attr` is a valid, writable `sched_attr` of `size` bytes (VER0 layout)
     // that outlives the call; pid 0 names the calling thread; flags 0. The kernel
     // writes at most `size` bytes of it.
     let r = unsafe { libc::syscall(libc::SYS_sched_getattr, 0, &mut attr as *mut SchedAttr, size, 0) };
-    (r == 0 && attr.sched_runtime > 0).then(|| Duration::from_nanos(attr.sched_runtime))
+    if r == 0 { Ok(attr) } else { Err(std::io::Error::last_os_error()) }
 }
 
 /// CPU time the calling thread has used (zero if unknown).
@@ -247,7 +245,7 @@ fn set_normal() -> std::io::Result<()> {
 }
 
 #[cfg(not(target_os = "linux"))]
-pub(crate) fn set_slice(_slice: Duration, _batch: bool) -> std::io::Result<()> {
+pub(crate) fn set_slice(_slice: Duration) -> std::io::Result<()> {
     Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "time slices are set on Linux only"))
 }
 
@@ -265,9 +263,17 @@ pub(crate) fn set_batch() -> std::io::Result<()> {
 mod tests {
     use super::*;
 
-    /// A worker's slice is what it asked for, and asking keeps its nice level (the
-    /// call sets both, so a wrong nice would either fail unprivileged or change the
-    /// searches' share). Kernels that report no slice (before 6.12) ignore it.
+    /// The calling thread's policy number, from `/proc/thread-self/sched`.
+    fn policy() -> u32 {
+        let text = std::fs::read_to_string("/proc/thread-self/sched").unwrap();
+        let line = text.lines().find(|l| l.starts_with("policy")).unwrap();
+        line.rsplit(':').next().unwrap().trim().parse().unwrap()
+    }
+
+    /// A worker's slice is what it asked for, and asking keeps its nice level and
+    /// policy (the call sets the nice level, so a wrong one would either fail
+    /// unprivileged or change the searches' share; `--worker-batch` must stay
+    /// `SCHED_BATCH`). Kernels that report no slice (before 6.12) ignore it.
     #[test]
     fn a_slice_asked_for_is_taken_and_keeps_the_nice_level() {
         std::thread::spawn(|| {
@@ -277,10 +283,14 @@ mod tests {
             }
             let tid = rustix::thread::gettid();
             rustix::process::setpriority_process(Some(tid), 3).unwrap();
-            set_slice(Duration::from_millis(3), false).unwrap();
+            set_slice(Duration::from_millis(3)).unwrap();
             assert_eq!(slice(), Some(Duration::from_millis(3)));
             assert_eq!(rustix::process::getpriority_process(Some(tid)).unwrap(), 3);
-            set_slice(IPC_SLICE, false).unwrap();
+            assert_eq!(policy(), libc::SCHED_OTHER as u32);
+            set_batch().unwrap();
+            set_slice(Duration::from_millis(2)).unwrap();
+            assert_eq!((slice(), policy()), (Some(Duration::from_millis(2)), libc::SCHED_BATCH as u32));
+            set_slice(IPC_SLICE).unwrap();
             assert_eq!(slice(), Some(IPC_SLICE));
             // The IPC thread starts the workers and the cleanup thread after asking:
             // they must not inherit its short slice.
