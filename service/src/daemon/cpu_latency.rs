@@ -21,8 +21,8 @@ use tracing::{debug, info};
 pub(crate) struct CpuLatency {
     /// The open request (`None`: off, or the system refused it).
     file: Option<std::fs::File>,
-    /// The latency asked for while held, µs.
-    target_us: u32,
+    /// The latency asked for while held, µs (at most `NONE_US`).
+    target_us: i32,
     held: bool,
     /// Whether the first hold was logged.
     logged: bool,
@@ -44,18 +44,17 @@ impl CpuLatency {
     /// for nothing until [`hold`](Self::hold). Where it may not be opened (it needs
     /// root), says so once and works without it.
     pub(crate) fn open(target_us: Option<u32>, device: &Path) -> CpuLatency {
-        let mut me = CpuLatency { file: None, target_us: target_us.unwrap_or(0), held: false, logged: false };
-        if target_us.is_none() {
+        let target_us = target_us.map_or(Self::NONE_US, |us| i32::try_from(us).unwrap_or(Self::NONE_US));
+        let mut me = CpuLatency { file: None, target_us, held: false, logged: false };
+        if target_us == Self::NONE_US {
             return me;
         }
         match std::fs::OpenOptions::new().write(true).open(device) {
-            Ok(mut f) => match f.write_all(&Self::NONE_US.to_ne_bytes()) {
-                Ok(()) => me.file = Some(f),
-                Err(e) => info!(
-                    "cannot make a CPU latency request at {} ({e}); idle cores wake as the kernel decides",
-                    device.display()
-                ),
-            },
+            // Ask for nothing yet; a device that takes no value is dropped here.
+            Ok(f) => {
+                me.file = Some(f);
+                me.write(Self::NONE_US);
+            }
             Err(e) => info!(
                 "cannot open {} ({e}): idle cores wake as the kernel decides (tens of µs more for a request after a pause); it needs root (see README, daemon priorities)",
                 device.display()
@@ -75,8 +74,7 @@ impl CpuLatency {
         if self.held {
             return;
         }
-        let target = i32::try_from(self.target_us).unwrap_or(Self::NONE_US);
-        if self.write(target) {
+        if self.write(self.target_us) {
             self.held = true;
             if self.logged {
                 debug!(target_us = self.target_us, "CPU latency request held: traffic is steady");
