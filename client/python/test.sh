@@ -45,7 +45,6 @@ fi
 # as there, so the features match and nothing is built twice).
 (cd "$root" && cargo build --quiet --workspace --all-targets)
 
-site="$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 if [ "$maturin" = 1 ]; then
     # Build the extension module and install the package into the venv (editable).
     (cd "$here" && VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" "$venv/bin/maturin" develop --quiet)
@@ -54,6 +53,7 @@ else
     # this interpreter. A copy, so that a module `maturin develop` left in the
     # source tree is never the one imported; `dyfos.pth` is the file maturin's
     # editable install writes, so only one of the two is ever on the path.
+    site="$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
     suffix="$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')"
     pkg="$target/py-dev"
     rm -rf "$pkg"
