@@ -311,6 +311,13 @@ impl Client {
         &self.config
     }
 
+    /// Sets how long a reconnect, after the daemon went away, waits for a daemon to
+    /// appear (`config().connect_timeout`); `Duration::ZERO` tries once and reports
+    /// `NoDaemon` at once. The C ABI sets it so, after connecting.
+    pub fn set_connect_timeout(&mut self, timeout: Duration) {
+        self.config.connect_timeout = timeout;
+    }
+
     /// Lets the caller end a call while it waits for its reply: `check` runs about
     /// every 100 ms of the wait (once it sleeps) and when a signal interrupts it, and
     /// `true` ends the call with `Interrupted`. The Python binding uses it to raise
@@ -336,6 +343,7 @@ impl Client {
                         return Err(ClientOpenError::NoDaemon {
                             service: self.names.rendezvous.clone(),
                             prefix: self.names.prefix.clone(),
+                            domain: self.config.domain.clone(),
                             waited,
                         });
                     }
@@ -394,7 +402,11 @@ impl Client {
             *loan.user_header_mut() = header;
             let pending = loan.write_from_slice(&records).send().map_err(ipc)?;
             if pending.number_of_server_connections() == 0 {
-                return Err(CallError::NoDaemon { service: names.rendezvous.clone(), prefix: names.prefix.clone() });
+                return Err(CallError::NoDaemon {
+                    service: names.rendezvous.clone(),
+                    prefix: names.prefix.clone(),
+                    domain: config.domain.clone(),
+                });
             }
             conn.await_reply(
                 config.spin,
@@ -447,7 +459,11 @@ impl Client {
             *loan.user_header_mut() = header;
             let pending = loan.write_from_slice(&records).send().map_err(ipc)?;
             if pending.number_of_server_connections() == 0 {
-                return Err(CallError::NoDaemon { service: names.map.clone(), prefix: names.prefix.clone() });
+                return Err(CallError::NoDaemon {
+                    service: names.map.clone(),
+                    prefix: names.prefix.clone(),
+                    domain: config.domain.clone(),
+                });
             }
             conn.await_reply(
                 config.spin,
@@ -633,7 +649,11 @@ impl Client {
             let request = StatsRequest { request_id: id, reply_to: conn.reply_to };
             let pending = conn.stats.send_copy(request).map_err(ipc)?;
             if pending.number_of_server_connections() == 0 {
-                return Err(CallError::NoDaemon { service: names.stats.clone(), prefix: names.prefix.clone() });
+                return Err(CallError::NoDaemon {
+                    service: names.stats.clone(),
+                    prefix: names.prefix.clone(),
+                    domain: config.domain.clone(),
+                });
             }
             conn.await_reply(
                 config.spin,
@@ -704,5 +724,22 @@ mod tests {
         let err = Client::connect(&config).unwrap_err();
         assert!(matches!(err, ClientOpenError::NoDaemon { .. }), "{err}");
         assert!(err.to_string().contains("dyfosd --prefix dyfos-client-unit-"), "{err}");
+        assert!(err.to_string().contains("the default iceoryx2 domain"), "{err}");
+    }
+
+    #[test]
+    fn no_daemon_messages_name_the_domain() {
+        let domain = Some("dyt_robot_".to_string());
+        let open = ClientOpenError::NoDaemon {
+            service: "p/rendezvous".into(),
+            prefix: "p/".into(),
+            domain: domain.clone(),
+            waited: Duration::ZERO,
+        };
+        let request = crate::RendezvousError::NoDaemon { service: "p/rendezvous".into(), prefix: "p/".into(), domain };
+        for message in [open.to_string(), request.to_string()] {
+            assert!(message.contains("in iceoryx2 domain `dyt_robot_`"), "{message}");
+            assert!(message.contains("`dyfosd --prefix p/ --domain dyt_robot_`"), "{message}");
+        }
     }
 }

@@ -14,13 +14,17 @@ pub enum ClientOpenError {
     InvalidDomain(String),
     /// No daemon serves this prefix.
     #[error(
-        "no dyfosd serves `{service}` (waited {waited:?}); start one with `dyfosd --prefix {prefix}`, or pass the prefix it uses"
+        "no dyfosd serves `{service}` in {} (waited {waited:?}); start one with `dyfosd --prefix {prefix}{}`, or pass the prefix and domain it uses",
+        in_domain(domain.as_deref()),
+        domain_flag(domain.as_deref())
     )]
     NoDaemon {
         /// The service tried.
         service: String,
         /// The prefix.
         prefix: String,
+        /// The iceoryx2 domain looked in (`None`: iceoryx2's default).
+        domain: Option<String>,
         /// How long the client waited for it.
         waited: Duration,
     },
@@ -39,11 +43,21 @@ pub enum ClientOpenError {
     Ipc(String),
 }
 
+/// "iceoryx2 domain `d`", or the default domain, for messages.
+fn in_domain(domain: Option<&str>) -> String {
+    domain.map_or_else(|| "the default iceoryx2 domain".to_string(), |d| format!("iceoryx2 domain `{d}`"))
+}
+
+/// The `dyfosd` flag that selects the domain, if not the default.
+fn domain_flag(domain: Option<&str>) -> String {
+    domain.map_or_else(String::new, |d| format!(" --domain {d}"))
+}
+
 /// A request's failure, before it is named by operation.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum CallError {
     Connect(ClientOpenError),
-    NoDaemon { service: String, prefix: String },
+    NoDaemon { service: String, prefix: String, domain: Option<String> },
     DaemonGone,
     Timeout(Duration),
     Rejected(Rejection),
@@ -67,12 +81,18 @@ macro_rules! request_error {
             #[error(transparent)]
             Connect(#[from] ClientOpenError),
             /// No daemon serves the prefix: it is not running or is restarting.
-            #[error("no dyfosd serves `{service}`; start one with `dyfosd --prefix {prefix}` (retryable)")]
+            #[error(
+                "no dyfosd serves `{service}` in {}; start one with `dyfosd --prefix {prefix}{}` (retryable)",
+                in_domain(domain.as_deref()),
+                domain_flag(domain.as_deref())
+            )]
             NoDaemon {
                 /// The service.
                 service: String,
                 /// The prefix.
                 prefix: String,
+                /// The iceoryx2 domain (`None`: iceoryx2's default).
+                domain: Option<String>,
             },
             /// The daemon stopped or restarted while the request was in flight.
             #[error("dyfosd went away while the {what} request was in flight (stopped or restarted); retry, the client reconnects by itself", what = $what)]
@@ -131,7 +151,7 @@ macro_rules! request_error {
             fn from(e: CallError) -> Self {
                 match e {
                     CallError::Connect(e) => $name::Connect(e),
-                    CallError::NoDaemon { service, prefix } => $name::NoDaemon { service, prefix },
+                    CallError::NoDaemon { service, prefix, domain } => $name::NoDaemon { service, prefix, domain },
                     CallError::DaemonGone => $name::DaemonGone,
                     CallError::Timeout(t) => $name::Timeout(t),
                     CallError::Rejected(r) => $name::Rejected(r),
