@@ -47,13 +47,17 @@ int main(int argc, char **argv) {
   dyfos_answer answer;
   uint64_t map, version;
   char *json = NULL; /* ours: freed with dyfos_string_free */
+  /* 5 s for the daemon to answer, and the default timeout of every call below (their 0). */
   dyfos_status status = dyfos_client_connect(prefix, domain, 5000, &client);
-  if (status == DYFOS_STATUS_OK) status = dyfos_client_upload_scenario(client, scenario, &map, &version);
+  if (status == DYFOS_STATUS_OK) status = dyfos_client_upload_scenario(client, 0, scenario, 0, &map, &version);
+  /* The scenario's belief and parameters; every other field at its default (what a
+   * request zeroed with {0}, or filled by dyfos_rendezvous_request_init, holds). */
   if (status == DYFOS_STATUS_OK) status = dyfos_rendezvous_request_from_scenario(scenario, map, &request);
   if (status == DYFOS_STATUS_OK) {
     request.seed = argc > 4 ? strtoull(argv[4], NULL, 10) : 0;
+    request.has_expected_version = 1; /* the map as uploaded, not changed since */
     request.expected_version = version;
-    status = dyfos_client_rendezvous(client, &request, &answer);
+    status = dyfos_client_rendezvous(client, 0, &request, &answer);
   }
   if (status == DYFOS_STATUS_OK) status = dyfos_answer_to_json(&answer, &json);
   if (status == DYFOS_STATUS_OK) {

@@ -10,8 +10,10 @@
 // Errors are exceptions derived from dyfos::Error (status() is the dyfos_status code,
 // name() its snake_case name, what() the message): UnknownMapError,
 // VersionMismatchError, InvalidRequestError, NoFeasiblePoseError,
-// DeadlineExceededError, BusyError, DaemonGoneError, TimeoutError. A Client is
-// move-only; its calls may come from several threads (the library serialises them).
+// DeadlineExceededError, OverCapacityError, BusyError, DaemonGoneError,
+// TimeoutError. A Client is move-only; its calls may come from several threads (the
+// library serialises them). dyfos.h's rules (threads, signals, ownership) hold here.
+// Compiles clean with -Wall -Wextra -Wconversion -Wsign-conversion.
 #ifndef DYFOS_HPP
 #define DYFOS_HPP
 
@@ -35,9 +37,10 @@ enum class ErrorKind {
   InvalidRequest,   ///< malformed or invalid request, belief, params, deltas, arguments; map exists; chunks
   NoFeasiblePose,   ///< no candidate pose passed the constraints
   DeadlineExceeded, ///< the deadline passed before any feasible pose was found
-  Busy,             ///< busy, over capacity, shutting down: retry later or send less
+  OverCapacity,     ///< too large for the daemon's limits: send less or make room; a retry cannot help
+  Busy,             ///< busy or shutting down: retry later
   DaemonGone,       ///< no daemon, or it went away mid-request: retry (the client reconnects)
-  Timeout,          ///< no reply within the client's timeout
+  Timeout,          ///< no reply within the call's timeout
   Other,            ///< storage failed, internal error, ipc, incompatible daemon, panic
 };
 
@@ -62,8 +65,8 @@ inline ErrorKind error_kind(dyfos_status status) noexcept {
     case DYFOS_STATUS_INVALID_ARGUMENT: return ErrorKind::InvalidRequest;
     case DYFOS_STATUS_NO_FEASIBLE_POSE: return ErrorKind::NoFeasiblePose;
     case DYFOS_STATUS_DEADLINE_EXCEEDED: return ErrorKind::DeadlineExceeded;
+    case DYFOS_STATUS_OVER_CAPACITY: return ErrorKind::OverCapacity;
     case DYFOS_STATUS_BUSY:
-    case DYFOS_STATUS_OVER_CAPACITY:
     case DYFOS_STATUS_SHUTTING_DOWN: return ErrorKind::Busy;
     case DYFOS_STATUS_NO_DAEMON:
     case DYFOS_STATUS_DAEMON_GONE: return ErrorKind::DaemonGone;
@@ -98,11 +101,15 @@ struct InvalidRequestError : Error { using Error::Error; };
 struct NoFeasiblePoseError : Error { using Error::Error; };
 /// DYFOS_STATUS_DEADLINE_EXCEEDED: give more time, or accept no answer.
 struct DeadlineExceededError : Error { using Error::Error; };
-/// Busy, over capacity or shutting down: retry later, or send less.
+/// DYFOS_STATUS_OVER_CAPACITY: too many records (a batch over DYFOS_MAX_BATCH_RECORDS,
+/// inline deltas over DYFOS_MAX_INLINE_RECORDS), maps, uploads, obstacles or cells.
+/// Sending the same again cannot help: split the batch, or delete maps.
+struct OverCapacityError : Error { using Error::Error; };
+/// Busy or shutting down: retry later.
 struct BusyError : Error { using Error::Error; };
 /// No daemon, or it went away mid-request: retry; the client reconnects by itself.
 struct DaemonGoneError : Error { using Error::Error; };
-/// No reply within the client's timeout.
+/// No reply within the call's timeout.
 struct TimeoutError : Error { using Error::Error; };
 
 namespace detail {
@@ -128,6 +135,7 @@ inline void check(dyfos_status status) {
     case ErrorKind::InvalidRequest: throw InvalidRequestError(status, message);
     case ErrorKind::NoFeasiblePose: throw NoFeasiblePoseError(status, message);
     case ErrorKind::DeadlineExceeded: throw DeadlineExceededError(status, message);
+    case ErrorKind::OverCapacity: throw OverCapacityError(status, message);
     case ErrorKind::Busy: throw BusyError(status, message);
     case ErrorKind::DaemonGone: throw DaemonGoneError(status, message);
     case ErrorKind::Timeout: throw TimeoutError(status, message);
@@ -140,6 +148,17 @@ inline std::string take(char* s) {
   std::string out = s ? std::string(s) : std::string();
   dyfos_string_free(s);
   return out;
+}
+
+/// A call's timeout for the C API: none = 0 (the client's); not positive throws.
+inline std::uint64_t timeout_ms(const std::optional<std::chrono::milliseconds>& timeout) {
+  if (!timeout) return 0;
+  if (timeout->count() <= 0) {
+    throw InvalidRequestError(DYFOS_STATUS_INVALID_ARGUMENT,
+                              "timeout = " + std::to_string(timeout->count()) +
+                                  " ms: give a positive timeout, or none for the client's");
+  }
+  return static_cast<std::uint64_t>(timeout->count());
 }
 
 }  // namespace detail
@@ -161,50 +180,64 @@ enum class Model : std::uint32_t {
 };
 
 /// Parameters (SPEC §11): everything not set is the SPEC default. Each setter
-/// sets the field's bit, e.g. `dyfos::Params().lambda(2.0).model(dyfos::Model::Anisotropic)`.
+/// sets the field's bit, e.g. `dyfos::Params().lambda(2.0).model(dyfos::Model::Anisotropic)`;
+/// each getter gives the value a request uses: the field if its bit is set, else
+/// the default.
 class Params {
  public:
-  Params() { detail::check(dyfos_params_init(&raw_)); }
-  /// From a JSON object of SPEC §11 names; throws InvalidRequestError naming a bad field.
+  Params() : raw_(defaults()) {}
+  /// From a JSON object of SPEC §11 names; throws InvalidRequestError naming a bad
+  /// field (DYFOS_STATUS_INVALID_ARGUMENT for an unknown one, DYFOS_STATUS_INVALID_PARAMS
+  /// for a value out of range).
   static Params from_json(const std::string& json) {
     Params p;
     detail::check(dyfos_params_from_json(json.c_str(), &p.raw_));
     return p;
   }
-#define DYFOS_HPP_SETTER(name, type, bit) \
-  Params& name(type v) {                  \
-    raw_.name = v;                        \
-    raw_.set |= bit;                      \
-    return *this;                         \
-  }
-  DYFOS_HPP_SETTER(rover_radius, double, DYFOS_PARAM_ROVER_RADIUS)
-  DYFOS_HPP_SETTER(marker_size, double, DYFOS_PARAM_MARKER_SIZE)
-  DYFOS_HPP_SETTER(marker_height, double, DYFOS_PARAM_MARKER_HEIGHT)
-  DYFOS_HPP_SETTER(viewer_radius, double, DYFOS_PARAM_VIEWER_RADIUS)
-  DYFOS_HPP_SETTER(safety_margin, double, DYFOS_PARAM_SAFETY_MARGIN)
-  DYFOS_HPP_SETTER(z_min, double, DYFOS_PARAM_Z_MIN)
-  DYFOS_HPP_SETTER(z_max, double, DYFOS_PARAM_Z_MAX)
-  DYFOS_HPP_SETTER(camera_pitch, double, DYFOS_PARAM_CAMERA_PITCH)
-  DYFOS_HPP_SETTER(f_h, double, DYFOS_PARAM_F_H)
-  DYFOS_HPP_SETTER(f_v, double, DYFOS_PARAM_F_V)
-  DYFOS_HPP_SETTER(rho_min, double, DYFOS_PARAM_RHO_MIN)
-  DYFOS_HPP_SETTER(rho_max, double, DYFOS_PARAM_RHO_MAX)
-  DYFOS_HPP_SETTER(kappa, double, DYFOS_PARAM_KAPPA)
-  DYFOS_HPP_SETTER(lambda, double, DYFOS_PARAM_LAMBDA)
-  DYFOS_HPP_SETTER(perimeter_points, std::uint32_t, DYFOS_PARAM_PERIMETER_POINTS)
-#undef DYFOS_HPP_SETTER
-  Params& t_vs(const std::array<double, 3>& v) {
-    for (int i = 0; i < 3; ++i) raw_.t_vs[i] = v[i];
+#define DYFOS_HPP_FIELD(name, type, bit)                                    \
+  Params& name(type v) noexcept {                                          \
+    raw_.name = v;                                                         \
+    raw_.set |= bit;                                                       \
+    return *this;                                                          \
+  }                                                                        \
+  type name() const noexcept { return is_set(bit) ? raw_.name : defaults().name; }
+  DYFOS_HPP_FIELD(rover_radius, double, DYFOS_PARAM_ROVER_RADIUS)
+  DYFOS_HPP_FIELD(marker_size, double, DYFOS_PARAM_MARKER_SIZE)
+  DYFOS_HPP_FIELD(marker_height, double, DYFOS_PARAM_MARKER_HEIGHT)
+  DYFOS_HPP_FIELD(viewer_radius, double, DYFOS_PARAM_VIEWER_RADIUS)
+  DYFOS_HPP_FIELD(safety_margin, double, DYFOS_PARAM_SAFETY_MARGIN)
+  DYFOS_HPP_FIELD(z_min, double, DYFOS_PARAM_Z_MIN)
+  DYFOS_HPP_FIELD(z_max, double, DYFOS_PARAM_Z_MAX)
+  DYFOS_HPP_FIELD(camera_pitch, double, DYFOS_PARAM_CAMERA_PITCH)
+  DYFOS_HPP_FIELD(f_h, double, DYFOS_PARAM_F_H)
+  DYFOS_HPP_FIELD(f_v, double, DYFOS_PARAM_F_V)
+  DYFOS_HPP_FIELD(rho_min, double, DYFOS_PARAM_RHO_MIN)
+  DYFOS_HPP_FIELD(rho_max, double, DYFOS_PARAM_RHO_MAX)
+  DYFOS_HPP_FIELD(kappa, double, DYFOS_PARAM_KAPPA)
+  DYFOS_HPP_FIELD(lambda, double, DYFOS_PARAM_LAMBDA)
+  DYFOS_HPP_FIELD(perimeter_points, std::uint32_t, DYFOS_PARAM_PERIMETER_POINTS)
+#undef DYFOS_HPP_FIELD
+  Params& t_vs(const std::array<double, 3>& v) noexcept {
+    for (std::size_t i = 0; i < 3; ++i) raw_.t_vs[i] = v[i];
     raw_.set |= DYFOS_PARAM_T_VS;
     return *this;
   }
-  Params& model(Model m) {
+  std::array<double, 3> t_vs() const noexcept {
+    const dyfos_params& from = is_set(DYFOS_PARAM_T_VS) ? raw_ : defaults();
+    return {from.t_vs[0], from.t_vs[1], from.t_vs[2]};
+  }
+  Params& model(Model m) noexcept {
     raw_.model = static_cast<std::uint32_t>(m);
     raw_.set |= DYFOS_PARAM_MODEL;
     return *this;
   }
+  Model model() const noexcept {
+    return static_cast<Model>(is_set(DYFOS_PARAM_MODEL) ? raw_.model : defaults().model);
+  }
+  /// Whether every field of `bits` (DYFOS_PARAM_* bits) is given.
+  bool is_set(std::uint32_t bits) const noexcept { return (raw_.set & bits) == bits; }
   /// Wraps a C struct as it is (its `set` bits included).
-  static Params from_raw(const dyfos_params& raw) {
+  static Params from_raw(const dyfos_params& raw) noexcept {
     Params p;
     p.raw_ = raw;
     return p;
@@ -213,7 +246,16 @@ class Params {
   const dyfos_params& raw() const noexcept { return raw_; }
 
  private:
-  dyfos_params raw_{};
+  /// The SPEC defaults, with `set` 0 (dyfos_params_init cannot fail on a valid pointer).
+  static const dyfos_params& defaults() noexcept {
+    static const dyfos_params values = [] {
+      dyfos_params p{};
+      dyfos_params_init(&p);
+      return p;
+    }();
+    return values;
+  }
+  dyfos_params raw_;
 };
 
 /// A rendezvous query: the map, the rover's belief, and how to search.
@@ -224,40 +266,60 @@ struct RendezvousRequest {
   Algorithm algorithm = Algorithm::Dyfos;
   std::uint64_t seed = 0;                        ///< same request + seed = same answer, bit for bit
   Params params;                                 ///< SPEC defaults unless set
-  std::optional<std::uint64_t> budget;           ///< most candidates; none = the algorithm's own limits
-  std::optional<std::chrono::microseconds> deadline;  ///< answer with the best so far when it passes
-  std::optional<std::uint64_t> expected_version;      ///< the map must be at this version first
-  std::optional<std::string> deltas_json;        ///< map deltas applied before the search (JSON array)
+  /// Most candidates to evaluate; none = the algorithm's own limits. 0 can find
+  /// nothing: InvalidRequestError (DYFOS_STATUS_MALFORMED_REQUEST).
+  std::optional<std::uint64_t> budget;
+  /// Answer with the best pose so far when it passes (counted from the daemon's
+  /// receipt); none = no deadline. Must be positive (else InvalidRequestError,
+  /// DYFOS_STATUS_INVALID_DEADLINE) and at most an hour.
+  std::optional<std::chrono::microseconds> deadline;
+  /// The map must be at this version before `deltas_json`; none = any version. The
+  /// version counts deltas, not batches: each delta applied adds 1.
+  std::optional<std::uint64_t> expected_version;
+  /// Map deltas applied before the search (a JSON array, as `dyfos map apply`
+  /// reads; at most DYFOS_MAX_INLINE_RECORDS records); they stay applied whatever
+  /// the search finds, each adding 1 to the map's version.
+  std::optional<std::string> deltas_json;
 
   /// The request for a scenario's rover (its belief and parameters) on map `map`.
   static RendezvousRequest from_scenario(const std::string& scenario_json, std::uint64_t map) {
-    dyfos_rendezvous_request c;
+    dyfos_rendezvous_request c{};
     detail::check(dyfos_rendezvous_request_from_scenario(scenario_json.c_str(), map, &c));
     RendezvousRequest r;
     r.map = c.map;
-    for (int i = 0; i < 3; ++i) {
+    for (std::size_t i = 0; i < 3; ++i) {
       r.mean[i] = c.mean[i];
-      for (int j = 0; j < 3; ++j) r.cov[i][j] = c.cov[i][j];
+      for (std::size_t j = 0; j < 3; ++j) r.cov[i][j] = c.cov[i][j];
     }
     r.params = Params::from_raw(c.params);
     return r;
   }
 
-  /// The C struct; `deltas_json` points into this object, so keep it alive.
+  /// The C struct; `deltas_json` points into this object, so keep it alive. Throws
+  /// InvalidRequestError for a budget of 0 or a deadline that is not positive.
   dyfos_rendezvous_request raw() const {
-    dyfos_rendezvous_request c;
-    detail::check(dyfos_rendezvous_request_init(&c));
+    if (budget && *budget == 0) {
+      throw InvalidRequestError(DYFOS_STATUS_MALFORMED_REQUEST,
+                                "budget = 0 evaluations can find nothing; leave it empty for the algorithm's own limits");
+    }
+    if (deadline && deadline->count() <= 0) {
+      throw InvalidRequestError(DYFOS_STATUS_INVALID_DEADLINE,
+                                "deadline = " + std::to_string(deadline->count()) +
+                                    " us: give a positive duration, or leave it empty for no deadline");
+    }
+    dyfos_rendezvous_request c{};
     c.map = map;
-    for (int i = 0; i < 3; ++i) {
+    for (std::size_t i = 0; i < 3; ++i) {
       c.mean[i] = mean[i];
-      for (int j = 0; j < 3; ++j) c.cov[i][j] = cov[i][j];
+      for (std::size_t j = 0; j < 3; ++j) c.cov[i][j] = cov[i][j];
     }
     c.algorithm = static_cast<std::uint32_t>(algorithm);
     c.seed = seed;
     c.params = params.raw();
     c.budget = budget.value_or(0);
     c.deadline_micros = deadline ? static_cast<std::uint64_t>(deadline->count()) : 0;
-    c.expected_version = expected_version.value_or(DYFOS_ANY_VERSION);
+    c.has_expected_version = expected_version ? 1u : 0u;
+    c.expected_version = expected_version.value_or(0);
     c.deltas_json = deltas_json ? deltas_json->c_str() : nullptr;
     return c;
   }
@@ -266,26 +328,29 @@ struct RendezvousRequest {
 /// The optimal sensor pose found (SPEC §8).
 class Answer {
  public:
-  explicit Answer(const dyfos_answer& raw) : raw_(raw) {}
+  /// An empty answer (every number 0), to be assigned a real one.
+  Answer() noexcept : raw_{} {}
+  explicit Answer(const dyfos_answer& raw) noexcept : raw_(raw) {}
   Algorithm algorithm() const noexcept { return static_cast<Algorithm>(raw_.algorithm); }
   /// One of DYFOS_STOP_*; DYFOS_STOP_DEADLINE means the best pose found in time.
   std::uint32_t stop() const noexcept { return raw_.stop; }
+  /// The map version searched (after the request's deltas, one version each).
   std::uint64_t map_version() const noexcept { return raw_.map_version; }
   /// x = (ρ, ψ, φ, ψ_v).
-  std::array<double, 4> x() const { return to_array<4>(raw_.x); }
+  std::array<double, 4> x() const noexcept { return to_array<4>(raw_.x); }
   /// E = ln det Σ⁺.
   double cost() const noexcept { return raw_.cost; }
-  std::array<double, 3> sensor_position() const { return to_array<3>(raw_.sensor_position); }
+  std::array<double, 3> sensor_position() const noexcept { return to_array<3>(raw_.sensor_position); }
   /// (x, y, z, w), w ≥ 0.
-  std::array<double, 4> sensor_quaternion() const { return to_array<4>(raw_.sensor_quaternion); }
-  std::array<double, 3> viewer_position() const { return to_array<3>(raw_.viewer_position); }
+  std::array<double, 4> sensor_quaternion() const noexcept { return to_array<4>(raw_.sensor_quaternion); }
+  std::array<double, 3> viewer_position() const noexcept { return to_array<3>(raw_.viewer_position); }
   double viewer_yaw() const noexcept { return raw_.viewer_yaw; }
   /// Predicted measurement noise R, rows.
-  std::array<std::array<double, 2>, 2> R() const {
+  std::array<std::array<double, 2>, 2> R() const noexcept {
     return {to_array<2>(raw_.r[0]), to_array<2>(raw_.r[1])};
   }
   /// Predicted posterior Σ⁺, rows.
-  std::array<std::array<double, 3>, 3> posterior() const {
+  std::array<std::array<double, 3>, 3> posterior() const noexcept {
     return {to_array<3>(raw_.posterior[0]), to_array<3>(raw_.posterior[1]), to_array<3>(raw_.posterior[2])};
   }
   const dyfos_evaluations& evaluations() const noexcept { return raw_.evaluations; }
@@ -300,7 +365,7 @@ class Answer {
 
  private:
   template <std::size_t N>
-  static std::array<double, N> to_array(const double (&a)[N]) {
+  static std::array<double, N> to_array(const double (&a)[N]) noexcept {
     std::array<double, N> out{};
     for (std::size_t i = 0; i < N; ++i) out[i] = a[i];
     return out;
@@ -314,16 +379,23 @@ struct MapVersion {
   std::uint64_t version;
 };
 
-/// A connection to one dyfosd. Move-only; closed by the destructor.
+/// A connection to one dyfosd. Move-only; closed by the destructor (which waits for
+/// a call in progress on another thread). Any method may be called from several
+/// threads at once: the library serialises the calls of one client (one request at
+/// a time); use one Client per thread for parallel queries. The const methods
+/// change nothing of this object (rendezvous commits its request's deltas, if any,
+/// to the daemon's map). Every call takes an optional timeout, the longest wait for
+/// its reply; none = the client's. A moved-from Client throws InvalidRequestError
+/// (DYFOS_STATUS_NULL_PARAMETER) from every call.
 class Client {
  public:
   /// Connects to the daemon serving `prefix` (its --prefix) in iceoryx2 `domain`
-  /// (its --domain; none = the default), waiting up to `timeout`, which is also the
-  /// time every call waits for its reply. Throws DaemonGoneError if none serves it.
+  /// (its --domain; none = the default), waiting up to `timeout` (> 0), which is
+  /// also the client's default call timeout. Throws DaemonGoneError if none serves it.
   explicit Client(const std::string& prefix = "dyfos/", const std::optional<std::string>& domain = std::nullopt,
                   std::chrono::milliseconds timeout = std::chrono::milliseconds(1000)) {
     detail::check(dyfos_client_connect(prefix.c_str(), domain ? domain->c_str() : nullptr,
-                                       static_cast<std::uint64_t>(timeout.count()), &handle_));
+                                       detail::timeout_ms(timeout), &handle_));
   }
   ~Client() { dyfos_client_free(handle_); }
   Client(const Client&) = delete;
@@ -337,17 +409,23 @@ class Client {
     return *this;
   }
 
-  /// The daemon's health and counters, as the JSON `dyfos stats` prints.
-  std::string stats_json() {
+  using Timeout = std::optional<std::chrono::milliseconds>;
+
+  /// The daemon's health and counters, as the JSON `dyfos stats` prints (`maps`:
+  /// how many it holds; the daemon has no list of their ids).
+  std::string stats_json(Timeout timeout = std::nullopt) const {
     char* json = nullptr;
-    detail::check(dyfos_client_stats(handle_, &json));
+    detail::check(dyfos_client_stats(live("stats_json"), detail::timeout_ms(timeout), &json));
     return detail::take(json);
   }
 
-  /// Makes sure the daemon holds a scenario's map (SPEC §11 JSON text); its id and version.
-  MapVersion upload_scenario(const std::string& scenario_json) {
+  /// Makes sure the daemon holds a scenario's map (SPEC §11 JSON text) under its
+  /// content id; its id and version. If the id holds other content (e.g. changed by
+  /// deltas), `replace` replaces it, else InvalidRequestError (map_exists).
+  MapVersion upload_scenario(const std::string& scenario_json, bool replace = false, Timeout timeout = std::nullopt) {
     MapVersion out{};
-    detail::check(dyfos_client_upload_scenario(handle_, scenario_json.c_str(), &out.map, &out.version));
+    detail::check(dyfos_client_upload_scenario(live("upload_scenario"), detail::timeout_ms(timeout),
+                                               scenario_json.c_str(), replace ? 1u : 0u, &out.map, &out.version));
     return out;
   }
 
@@ -355,58 +433,81 @@ class Client {
   /// OctoMap's cell (0, 0, 0) has its minimum corner at `origin`. Returns the version.
   std::uint64_t upload_octomap(std::uint64_t map, const std::vector<std::uint8_t>& bt,
                                const std::array<double, 3>& origin, const std::array<double, 4>& bounds,
-                               double sun_elevation, double sun_azimuth, bool replace = false) {
+                               double sun_elevation, double sun_azimuth, bool replace = false,
+                               Timeout timeout = std::nullopt) {
     std::uint64_t version = 0;
-    detail::check(dyfos_client_upload_octomap(handle_, map, bt.data(), bt.size(), origin.data(), bounds.data(),
-                                              sun_elevation, sun_azimuth, replace ? 1u : 0u, &version));
+    detail::check(dyfos_client_upload_octomap(live("upload_octomap"), detail::timeout_ms(timeout), map, bt.data(),
+                                              bt.size(), origin.data(), bounds.data(), sun_elevation, sun_azimuth,
+                                              replace ? 1u : 0u, &version));
     return version;
   }
 
   /// Creates an empty map (version 0) with bounds (x_min, y_min, x_max, y_max) and
   /// the sun (elevation, azimuth).
   std::uint64_t create_map(std::uint64_t map, const std::array<double, 4>& bounds, double sun_elevation,
-                           double sun_azimuth) {
+                           double sun_azimuth, Timeout timeout = std::nullopt) {
     std::uint64_t version = 0;
-    detail::check(dyfos_client_create_map(handle_, map, bounds.data(), sun_elevation, sun_azimuth, &version));
+    detail::check(dyfos_client_create_map(live("create_map"), detail::timeout_ms(timeout), map, bounds.data(),
+                                          sun_elevation, sun_azimuth, &version));
     return version;
   }
 
-  /// Applies map deltas (a JSON array) atomically; the new version.
+  /// Applies map deltas (a JSON array, at most DYFOS_MAX_BATCH_RECORDS records)
+  /// atomically; the new version: the old one plus the number of deltas (the version
+  /// counts deltas, not batches). A larger batch throws OverCapacityError.
   std::uint64_t apply(std::uint64_t map, const std::string& deltas_json,
-                      std::optional<std::uint64_t> expected_version = std::nullopt) {
+                      std::optional<std::uint64_t> expected_version = std::nullopt, Timeout timeout = std::nullopt) {
     std::uint64_t version = 0;
-    detail::check(dyfos_client_apply(handle_, map, deltas_json.c_str(),
+    detail::check(dyfos_client_apply(live("apply"), detail::timeout_ms(timeout), map, deltas_json.c_str(),
                                      expected_version.value_or(DYFOS_ANY_VERSION), &version));
     return version;
   }
 
   /// The map as JSON (version, bounds, sun, obstacles, voxels).
-  std::string snapshot(std::uint64_t map) {
+  std::string snapshot(std::uint64_t map, Timeout timeout = std::nullopt) const {
     char* json = nullptr;
-    detail::check(dyfos_client_snapshot(handle_, map, &json));
+    detail::check(dyfos_client_snapshot(live("snapshot"), detail::timeout_ms(timeout), map, &json));
     return detail::take(json);
   }
 
+  /// Deletes map `map`; with `expected_version`, only if it is at that version.
+  void delete_map(std::uint64_t map, std::optional<std::uint64_t> expected_version = std::nullopt,
+                  Timeout timeout = std::nullopt) {
+    detail::check(dyfos_client_delete_map(live("delete_map"), detail::timeout_ms(timeout), map,
+                                          expected_version.value_or(DYFOS_ANY_VERSION)));
+  }
+
   /// The optimal sensor pose for `request`.
-  Answer rendezvous(const RendezvousRequest& request) {
+  Answer rendezvous(const RendezvousRequest& request, Timeout timeout = std::nullopt) const {
     dyfos_rendezvous_request c = request.raw();
     dyfos_answer answer{};
-    detail::check(dyfos_client_rendezvous(handle_, &c, &answer));
+    detail::check(dyfos_client_rendezvous(live("rendezvous"), detail::timeout_ms(timeout), &c, &answer));
     return Answer(answer);
   }
 
   /// Check mode: everything validated, nothing searched; the map version it would search.
-  std::uint64_t check(const RendezvousRequest& request) {
+  std::uint64_t check(const RendezvousRequest& request, Timeout timeout = std::nullopt) const {
     dyfos_rendezvous_request c = request.raw();
     std::uint64_t version = 0;
-    detail::check(dyfos_client_check(handle_, &c, &version));
+    detail::check(dyfos_client_check(live("check"), detail::timeout_ms(timeout), &c, &version));
     return version;
   }
 
-  /// The C handle (still owned by this object).
+  /// The C handle (still owned by this object; NULL once moved from).
   dyfos_client* handle() const noexcept { return handle_; }
 
  private:
+  /// The handle, or the moved-from error naming the method.
+  dyfos_client* live(const char* method) const {
+    if (handle_ == nullptr) {
+      throw InvalidRequestError(DYFOS_STATUS_NULL_PARAMETER,
+                                std::string("dyfos::Client::") + method +
+                                    ": this Client was moved from and holds no connection; use the Client it was "
+                                    "moved to");
+    }
+    return handle_;
+  }
+
   dyfos_client* handle_ = nullptr;
 };
 

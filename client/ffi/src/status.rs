@@ -12,70 +12,86 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 pub type dyfos_status = u32;
 
 /// Success.
-pub const DYFOS_STATUS_OK: dyfos_status = 0;
-/// A header field is not one of its allowed codes (e.g. a budget of 0 evaluations).
-pub const DYFOS_STATUS_MALFORMED_REQUEST: dyfos_status = 1;
+pub const DYFOS_STATUS_OK: dyfos_status = 0u32;
+/// The daemon could not decode a header field of the request (a code outside its
+/// set). A request made by this library never gets it from the daemon; dyfos.hpp
+/// uses it for a `budget` of 0 evaluations, which can find nothing (in the C
+/// struct, `budget` = 0 means no budget).
+pub const DYFOS_STATUS_MALFORMED_REQUEST: dyfos_status = 1u32;
 /// The request's `algorithm` is not one of the `DYFOS_ALGORITHM_*` codes.
-pub const DYFOS_STATUS_INVALID_ALGORITHM: dyfos_status = 2;
+pub const DYFOS_STATUS_INVALID_ALGORITHM: dyfos_status = 2u32;
 /// The belief's mean is not finite or its covariance is not symmetric positive definite.
-pub const DYFOS_STATUS_INVALID_BELIEF: dyfos_status = 3;
+pub const DYFOS_STATUS_INVALID_BELIEF: dyfos_status = 3u32;
 /// A parameter is out of its SPEC §11 range; the message names it.
-pub const DYFOS_STATUS_INVALID_PARAMS: dyfos_status = 4;
+pub const DYFOS_STATUS_INVALID_PARAMS: dyfos_status = 4u32;
 /// The requested SDSMM model cannot run in the daemon (`learned` without weights).
-pub const DYFOS_STATUS_UNSUPPORTED_MODEL: dyfos_status = 5;
+pub const DYFOS_STATUS_UNSUPPORTED_MODEL: dyfos_status = 5u32;
 /// The deadline is longer than the daemon accepts (one hour).
-pub const DYFOS_STATUS_INVALID_DEADLINE: dyfos_status = 6;
-/// A delta record is malformed.
-pub const DYFOS_STATUS_MALFORMED_DELTA: dyfos_status = 7;
-/// A delta was rejected by the map (unknown id to remove, bad geometry); the map is unchanged.
-pub const DYFOS_STATUS_INVALID_DELTA: dyfos_status = 8;
+pub const DYFOS_STATUS_INVALID_DEADLINE: dyfos_status = 6u32;
+/// Map deltas that cannot be read: `deltas_json` that is not a JSON array of
+/// deltas (the message says where), or, from the daemon, a record it cannot decode.
+pub const DYFOS_STATUS_MALFORMED_DELTA: dyfos_status = 7u32;
+/// A delta or map content was refused (unknown id to remove, bad geometry, bounds or
+/// sun, an unreadable OctoMap): the batch is refused whole and the map is unchanged.
+/// Bounds and sun given as arguments (`dyfos_client_create_map`,
+/// `dyfos_client_upload_octomap`) get this code too, as the daemon gives them.
+pub const DYFOS_STATUS_INVALID_DELTA: dyfos_status = 8u32;
 /// No map has this id: upload or create it first.
-pub const DYFOS_STATUS_UNKNOWN_MAP: dyfos_status = 9;
+pub const DYFOS_STATUS_UNKNOWN_MAP: dyfos_status = 9u32;
 /// The map's version is not the one the request expected: re-read the map and retry.
-pub const DYFOS_STATUS_MAP_VERSION_MISMATCH: dyfos_status = 10;
+pub const DYFOS_STATUS_MAP_VERSION_MISMATCH: dyfos_status = 10u32;
 /// The map id is taken (by other content, for an upload).
-pub const DYFOS_STATUS_MAP_EXISTS: dyfos_status = 11;
-/// Too many records, chunks, maps or uploads for the daemon's limits.
-pub const DYFOS_STATUS_OVER_CAPACITY: dyfos_status = 12;
+pub const DYFOS_STATUS_MAP_EXISTS: dyfos_status = 11u32;
+/// Too many records (see `DYFOS_MAX_BATCH_RECORDS`, `DYFOS_MAX_INLINE_RECORDS`),
+/// chunks, maps, uploads, obstacles or voxel cells for the daemon's limits. Not
+/// retryable as it is: send less (split the batch) or make room (delete maps).
+pub const DYFOS_STATUS_OVER_CAPACITY: dyfos_status = 12u32;
 /// An upload chunk arrived before the chunks that precede it.
-pub const DYFOS_STATUS_CHUNK_OUT_OF_ORDER: dyfos_status = 13;
+pub const DYFOS_STATUS_CHUNK_OUT_OF_ORDER: dyfos_status = 13u32;
 /// An upload chunk arrived twice.
-pub const DYFOS_STATUS_CHUNK_DUPLICATE: dyfos_status = 14;
+pub const DYFOS_STATUS_CHUNK_DUPLICATE: dyfos_status = 14u32;
 /// The upload this chunk belongs to was abandoned.
-pub const DYFOS_STATUS_CHUNK_INCOMPLETE: dyfos_status = 15;
+pub const DYFOS_STATUS_CHUNK_INCOMPLETE: dyfos_status = 15u32;
 /// No candidate pose passed the constraints (SPEC §8).
-pub const DYFOS_STATUS_NO_FEASIBLE_POSE: dyfos_status = 16;
+pub const DYFOS_STATUS_NO_FEASIBLE_POSE: dyfos_status = 16u32;
 /// The deadline passed before any feasible pose was found.
-pub const DYFOS_STATUS_DEADLINE_EXCEEDED: dyfos_status = 17;
+pub const DYFOS_STATUS_DEADLINE_EXCEEDED: dyfos_status = 17u32;
 /// The daemon's queue is full; retry shortly.
-pub const DYFOS_STATUS_BUSY: dyfos_status = 18;
+pub const DYFOS_STATUS_BUSY: dyfos_status = 18u32;
 /// The map change could not be written to the daemon's state directory; retry.
-pub const DYFOS_STATUS_STORAGE_FAILED: dyfos_status = 19;
+pub const DYFOS_STATUS_STORAGE_FAILED: dyfos_status = 19u32;
 /// The daemon is shutting down; retry once it is back.
-pub const DYFOS_STATUS_SHUTTING_DOWN: dyfos_status = 20;
+pub const DYFOS_STATUS_SHUTTING_DOWN: dyfos_status = 20u32;
 /// The daemon hit a bug handling the request (its log says where); please report it.
-pub const DYFOS_STATUS_INTERNAL_ERROR: dyfos_status = 21;
+pub const DYFOS_STATUS_INTERNAL_ERROR: dyfos_status = 21u32;
 /// A required pointer (a handle, an input or an output) is NULL, or a handle was
 /// already freed (or never came from `dyfos_client_connect`).
-pub const DYFOS_STATUS_NULL_PARAMETER: dyfos_status = 1000;
-/// An argument cannot be used: text that is not UTF-8, JSON that does not parse or is
-/// not of the expected shape, a number out of range (e.g. a timeout of 0).
-pub const DYFOS_STATUS_INVALID_ARGUMENT: dyfos_status = 1001;
-/// No `dyfosd` serves the prefix (not running, or restarting): start it, or retry.
-pub const DYFOS_STATUS_NO_DAEMON: dyfos_status = 1002;
+pub const DYFOS_STATUS_NULL_PARAMETER: dyfos_status = 1000u32;
+/// An argument cannot be used: text that is not UTF-8, a scenario or parameter JSON
+/// text that does not parse or has an unknown field, a scenario that `dyfos solve`
+/// would refuse (the message names the field), a flag other than 0 or 1, a timeout
+/// of 0 in `dyfos_client_connect`. A value the daemon checks gets the daemon's code
+/// wherever it is checked (parameters: `INVALID_PARAMS`; bounds, sun: `INVALID_DELTA`;
+/// deltas JSON: `MALFORMED_DELTA`).
+pub const DYFOS_STATUS_INVALID_ARGUMENT: dyfos_status = 1001u32;
+/// No `dyfosd` serves the prefix in the domain (not running, or restarting): start
+/// it, or retry after a pause. `dyfos_client_connect` waits up to its timeout for
+/// one; a handle whose daemon went away tries once to reconnect at each call and
+/// answers this at once while none serves.
+pub const DYFOS_STATUS_NO_DAEMON: dyfos_status = 1002u32;
 /// The daemon stopped or restarted while the request was in flight; retry (the
-/// handle reconnects by itself).
-pub const DYFOS_STATUS_DAEMON_GONE: dyfos_status = 1003;
-/// No reply within the handle's timeout: raise it, or give the request a deadline.
-pub const DYFOS_STATUS_TIMEOUT: dyfos_status = 1004;
+/// handle reconnects by itself at its next call).
+pub const DYFOS_STATUS_DAEMON_GONE: dyfos_status = 1003u32;
+/// No reply within the call's timeout: raise it, or give the request a deadline.
+pub const DYFOS_STATUS_TIMEOUT: dyfos_status = 1004u32;
 /// Any other shared-memory (iceoryx2) failure.
-pub const DYFOS_STATUS_IPC: dyfos_status = 1005;
+pub const DYFOS_STATUS_IPC: dyfos_status = 1005u32;
 /// A bug in this library was caught at the C boundary (no panic crosses it); please
 /// report it with the message.
-pub const DYFOS_STATUS_PANIC: dyfos_status = 1006;
+pub const DYFOS_STATUS_PANIC: dyfos_status = 1006u32;
 /// The daemon serves the prefix with other message types: run a `dyfosd` of the
 /// same version as this library.
-pub const DYFOS_STATUS_INCOMPATIBLE_DAEMON: dyfos_status = 1007;
+pub const DYFOS_STATUS_INCOMPATIBLE_DAEMON: dyfos_status = 1007u32;
 
 /// The client-side codes and their names, in code order.
 pub(crate) const CLIENT_CODES: [(dyfos_status, &str); 8] = [
@@ -221,6 +237,16 @@ pub(crate) fn boundary(body: impl FnOnce() -> Result<(), Failure>) -> dyfos_stat
     }
 }
 
+/// The panic boundary of a function that returns no status (`dyfos_string_free`):
+/// runs `body` and catches a panic, leaving this thread's last error message as it
+/// was, since the caller has no status telling it to look.
+pub(crate) fn boundary_quiet(body: impl FnOnce()) {
+    if let Err(payload) = catch_unwind(AssertUnwindSafe(body)) {
+        // Dropping a payload can itself panic; never let that unwind into C.
+        let _ = catch_unwind(AssertUnwindSafe(move || drop(payload)));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -289,7 +315,7 @@ mod tests {
             (Failure::from(RendezvousError::DaemonGone), DYFOS_STATUS_DAEMON_GONE),
             (Failure::from(MapRequestError::Timeout(std::time::Duration::from_secs(1))), DYFOS_STATUS_TIMEOUT),
             (
-                Failure::from(StatsRequestError::NoDaemon { service: "s".into(), prefix: "p/".into() }),
+                Failure::from(StatsRequestError::NoDaemon { service: "s".into(), prefix: "p/".into(), domain: None }),
                 DYFOS_STATUS_NO_DAEMON,
             ),
             (

@@ -2,7 +2,8 @@
 //! codes, and their conversions to and from the Rust client's types.
 
 use crate::status::{
-    DYFOS_STATUS_INVALID_ALGORITHM, DYFOS_STATUS_INVALID_BELIEF, DYFOS_STATUS_NULL_PARAMETER, Failure,
+    DYFOS_STATUS_INVALID_ALGORITHM, DYFOS_STATUS_INVALID_BELIEF, DYFOS_STATUS_MALFORMED_DELTA,
+    DYFOS_STATUS_NULL_PARAMETER, Failure,
 };
 use dyfos_shared::answer::{Algorithm, Answer, EvalStats, StopReason};
 use dyfos_shared::math::{Matrix3, Point3, UnitQuaternion, canonical_xyzw, rows3};
@@ -14,74 +15,85 @@ use dyfos_shared::world::MapDelta;
 use std::ffi::{CStr, c_char};
 use std::time::Duration;
 
-/// `expected_version` that accepts any map version.
+/// `expected_version` of `dyfos_client_apply` and `dyfos_client_delete_map` that
+/// accepts any map version.
 pub const DYFOS_ANY_VERSION: u64 = u64::MAX;
 
+/// Most delta records one `dyfos_client_apply` batch may carry (more is
+/// `DYFOS_STATUS_OVER_CAPACITY`, nothing sent). A delta is one record, except
+/// `SetVoxels` (1 + one per cell) and `SetVoxelBlocks` (1 + one per block).
+pub const DYFOS_MAX_BATCH_RECORDS: u32 = 4096u32;
+
+/// Most delta records a rendezvous request may carry in `deltas_json` (counted as
+/// for `DYFOS_MAX_BATCH_RECORDS`; more is `DYFOS_STATUS_OVER_CAPACITY`, nothing sent):
+/// apply larger batches with `dyfos_client_apply` first.
+pub const DYFOS_MAX_INLINE_RECORDS: u32 = 1024u32;
+
 /// Differential evolution with a final local polish (the DyFOS optimizer).
-pub const DYFOS_ALGORITHM_DYFOS: u32 = 0;
+pub const DYFOS_ALGORITHM_DYFOS: u32 = 0u32;
 /// Differential evolution exactly as SciPy's defaults, no polish (the paper's).
-pub const DYFOS_ALGORITHM_DYFOS_SCIPY: u32 = 1;
+pub const DYFOS_ALGORITHM_DYFOS_SCIPY: u32 = 1u32;
 /// Exhaustive grid on all of the daemon's workers.
-pub const DYFOS_ALGORITHM_BRUTE: u32 = 2;
+pub const DYFOS_ALGORITHM_BRUTE: u32 = 2u32;
 /// Uniform samples until the first feasible one.
-pub const DYFOS_ALGORITHM_RANDOM: u32 = 3;
+pub const DYFOS_ALGORITHM_RANDOM: u32 = 3u32;
 /// Rover in the image centre, uniform ρ and yaw until the first feasible one.
-pub const DYFOS_ALGORITHM_CENTER: u32 = 4;
+pub const DYFOS_ALGORITHM_CENTER: u32 = 4u32;
 
 /// `dyfos_params.model`: the paper's isotropic linear SDSMM (the default).
-pub const DYFOS_MODEL_PAPER: u32 = 0;
+pub const DYFOS_MODEL_PAPER: u32 = 0u32;
 /// `dyfos_params.model`: `paper`'s variance stretched along the line of sight.
-pub const DYFOS_MODEL_ANISOTROPIC: u32 = 1;
+pub const DYFOS_MODEL_ANISOTROPIC: u32 = 1u32;
 /// `dyfos_params.model`: the trained network (the daemon needs its weights).
-pub const DYFOS_MODEL_LEARNED: u32 = 2;
+pub const DYFOS_MODEL_LEARNED: u32 = 2u32;
 
 /// `dyfos_answer.stop`: the search ran to its natural end.
-pub const DYFOS_STOP_FINISHED: u32 = 0;
+pub const DYFOS_STOP_FINISHED: u32 = 0u32;
 /// `dyfos_answer.stop`: differential evolution hit its generation cap.
-pub const DYFOS_STOP_MAX_GENERATIONS: u32 = 1;
+pub const DYFOS_STOP_MAX_GENERATIONS: u32 = 1u32;
 /// `dyfos_answer.stop`: the request's evaluation budget ran out.
-pub const DYFOS_STOP_BUDGET: u32 = 2;
+pub const DYFOS_STOP_BUDGET: u32 = 2u32;
 /// `dyfos_answer.stop`: the deadline passed; the answer is the best found so far.
-pub const DYFOS_STOP_DEADLINE: u32 = 3;
+pub const DYFOS_STOP_DEADLINE: u32 = 3u32;
 /// `dyfos_answer.stop`: the search was abandoned (never in an answer the daemon sends).
-pub const DYFOS_STOP_ABANDONED: u32 = 4;
+pub const DYFOS_STOP_ABANDONED: u32 = 4u32;
 
 /// `dyfos_params.set` bit of `rover_radius`.
-pub const DYFOS_PARAM_ROVER_RADIUS: u32 = 1 << 0;
+pub const DYFOS_PARAM_ROVER_RADIUS: u32 = 1u32 << 0;
 /// `dyfos_params.set` bit of `marker_size`.
-pub const DYFOS_PARAM_MARKER_SIZE: u32 = 1 << 1;
+pub const DYFOS_PARAM_MARKER_SIZE: u32 = 1u32 << 1;
 /// `dyfos_params.set` bit of `marker_height`.
-pub const DYFOS_PARAM_MARKER_HEIGHT: u32 = 1 << 2;
+pub const DYFOS_PARAM_MARKER_HEIGHT: u32 = 1u32 << 2;
 /// `dyfos_params.set` bit of `viewer_radius`.
-pub const DYFOS_PARAM_VIEWER_RADIUS: u32 = 1 << 3;
+pub const DYFOS_PARAM_VIEWER_RADIUS: u32 = 1u32 << 3;
 /// `dyfos_params.set` bit of `safety_margin`.
-pub const DYFOS_PARAM_SAFETY_MARGIN: u32 = 1 << 4;
+pub const DYFOS_PARAM_SAFETY_MARGIN: u32 = 1u32 << 4;
 /// `dyfos_params.set` bit of `z_min`.
-pub const DYFOS_PARAM_Z_MIN: u32 = 1 << 5;
+pub const DYFOS_PARAM_Z_MIN: u32 = 1u32 << 5;
 /// `dyfos_params.set` bit of `z_max`.
-pub const DYFOS_PARAM_Z_MAX: u32 = 1 << 6;
+pub const DYFOS_PARAM_Z_MAX: u32 = 1u32 << 6;
 /// `dyfos_params.set` bit of `camera_pitch`.
-pub const DYFOS_PARAM_CAMERA_PITCH: u32 = 1 << 7;
+pub const DYFOS_PARAM_CAMERA_PITCH: u32 = 1u32 << 7;
 /// `dyfos_params.set` bit of `t_vs`.
-pub const DYFOS_PARAM_T_VS: u32 = 1 << 8;
+pub const DYFOS_PARAM_T_VS: u32 = 1u32 << 8;
 /// `dyfos_params.set` bit of `f_h`.
-pub const DYFOS_PARAM_F_H: u32 = 1 << 9;
+pub const DYFOS_PARAM_F_H: u32 = 1u32 << 9;
 /// `dyfos_params.set` bit of `f_v`.
-pub const DYFOS_PARAM_F_V: u32 = 1 << 10;
+pub const DYFOS_PARAM_F_V: u32 = 1u32 << 10;
 /// `dyfos_params.set` bit of `rho_min`.
-pub const DYFOS_PARAM_RHO_MIN: u32 = 1 << 11;
+pub const DYFOS_PARAM_RHO_MIN: u32 = 1u32 << 11;
 /// `dyfos_params.set` bit of `rho_max`.
-pub const DYFOS_PARAM_RHO_MAX: u32 = 1 << 12;
+pub const DYFOS_PARAM_RHO_MAX: u32 = 1u32 << 12;
 /// `dyfos_params.set` bit of `kappa`.
-pub const DYFOS_PARAM_KAPPA: u32 = 1 << 13;
+pub const DYFOS_PARAM_KAPPA: u32 = 1u32 << 13;
 /// `dyfos_params.set` bit of `lambda`.
-pub const DYFOS_PARAM_LAMBDA: u32 = 1 << 14;
+pub const DYFOS_PARAM_LAMBDA: u32 = 1u32 << 14;
 /// `dyfos_params.set` bit of `perimeter_points`.
-pub const DYFOS_PARAM_PERIMETER_POINTS: u32 = 1 << 15;
+pub const DYFOS_PARAM_PERIMETER_POINTS: u32 = 1u32 << 15;
 /// `dyfos_params.set` bit of `model`.
-pub const DYFOS_PARAM_MODEL: u32 = 1 << 16;
+pub const DYFOS_PARAM_MODEL: u32 = 1u32 << 16;
 /// `dyfos_params.set` with every field given.
-pub const DYFOS_PARAMS_ALL_SET: u32 = (1 << 17) - 1;
+pub const DYFOS_PARAMS_ALL_SET: u32 = (1u32 << 17) - 1;
 
 /// Every parameter of SPEC §11 (units as there: metres, radians). `set` says which
 /// fields are given: bit `DYFOS_PARAM_<NAME>` set means the field is used, clear
@@ -193,16 +205,25 @@ impl dyfos_params {
 }
 
 /// A rendezvous query (SPEC §8): where should the viewer's camera be to localize
-/// the rover on map `map`, whose a priori belief is `mean`/`cov`? Fill it with
-/// `dyfos_rendezvous_request_init` first (every parameter at its default,
-/// algorithm dyfos, seed 0, any version, no budget, deadline or deltas), then set
-/// the map, the belief and whatever else differs.
+/// the rover on map `map`, whose a priori belief is `mean`/`cov`?
+///
+/// Every field's zero is its default: a request zeroed with `= {0}` or `memset`
+/// asks for any map version, algorithm dyfos, seed 0, no budget, deadline or
+/// deltas, every parameter at its SPEC default. So `dyfos_rendezvous_request r =
+/// {0};` (or `dyfos_rendezvous_request_init(&r)`, the same request with the
+/// parameter fields readable), then set `map`, `mean`, `cov` and whatever else differs.
 #[repr(C)]
 #[derive(Debug, Clone, Copy)]
 pub struct dyfos_rendezvous_request {
     /// The map to search.
     pub map: u64,
-    /// The version the map must have before `deltas_json`, or `DYFOS_ANY_VERSION`.
+    /// 1: the map must be at `expected_version` before `deltas_json` (else
+    /// `DYFOS_STATUS_MAP_VERSION_MISMATCH`, nothing applied); 0: any version, and
+    /// `expected_version` is ignored. Other values are `DYFOS_STATUS_INVALID_ARGUMENT`.
+    pub has_expected_version: u32,
+    /// The version the map must have before `deltas_json`, when
+    /// `has_expected_version` is 1. The version counts deltas, not batches: each
+    /// delta applied adds 1 (a voxel run with its cells is one delta).
     pub expected_version: u64,
     /// Belief mean (x, y, θ): m, m, rad.
     pub mean: [f64; 3],
@@ -223,16 +244,22 @@ pub struct dyfos_rendezvous_request {
     pub params: dyfos_params,
     /// Map deltas applied (all or none) before the search, as a JSON array in the
     /// format of `dyfos map apply` files; NULL for none. Borrowed for the call only.
+    /// At most `DYFOS_MAX_INLINE_RECORDS` records. Once valid they are committed to
+    /// the map before the search and stay applied whatever it finds; each adds 1 to
+    /// the map's version.
     pub deltas_json: *const c_char,
 }
 
 impl dyfos_rendezvous_request {
-    /// The defaults `dyfos_rendezvous_request_init` writes: map 0, a zero belief (to
-    /// be set: a zero covariance is `DYFOS_STATUS_INVALID_BELIEF`).
+    /// The defaults `dyfos_rendezvous_request_init` writes: a zeroed request but for
+    /// the parameter fields, which hold their defaults (with `set` 0, as zeros would
+    /// mean the same). The belief is zero, to be set: a zero covariance is
+    /// `DYFOS_STATUS_INVALID_BELIEF`.
     pub(crate) fn defaults() -> Self {
         dyfos_rendezvous_request {
             map: 0,
-            expected_version: DYFOS_ANY_VERSION,
+            has_expected_version: 0,
+            expected_version: 0,
             mean: [0.0; 3],
             cov: [[0.0; 3]; 3],
             algorithm: DYFOS_ALGORITHM_DYFOS,
@@ -262,6 +289,15 @@ impl dyfos_rendezvous_request {
             )
         })?;
         let params = self.params.to_params()?;
+        let expected_version = match self.has_expected_version {
+            0 => None,
+            1 => Some(self.expected_version),
+            flag => {
+                return Err(Failure::invalid(format!(
+                    "has_expected_version = {flag} must be 0 (any version) or 1 (the map must be at expected_version)"
+                )));
+            }
+        };
         let deltas = if self.deltas_json.is_null() {
             Vec::new()
         } else {
@@ -271,7 +307,7 @@ impl dyfos_rendezvous_request {
         };
         Ok(RendezvousRequest {
             map: self.map,
-            expected_version: (self.expected_version != DYFOS_ANY_VERSION).then_some(self.expected_version),
+            expected_version,
             belief,
             deltas,
             algorithm,
@@ -285,7 +321,8 @@ impl dyfos_rendezvous_request {
 
 /// Map deltas from a JSON array (the `dyfos map apply` file format).
 pub(crate) fn deltas_from_json(text: &str) -> Result<Vec<MapDelta>, Failure> {
-    serde_json::from_str(text).map_err(|e| Failure::invalid(format!("deltas: not a JSON array of map deltas: {e}")))
+    serde_json::from_str(text)
+        .map_err(|e| Failure::new(DYFOS_STATUS_MALFORMED_DELTA, format!("deltas: not a JSON array of map deltas: {e}")))
 }
 
 /// Candidates evaluated, split by the first constraint that rejected them.
@@ -312,7 +349,8 @@ pub struct dyfos_answer {
     /// Why the search stopped, one of `DYFOS_STOP_*`; `DYFOS_STOP_DEADLINE` means
     /// the best pose found in time, not converged.
     pub stop: u32,
-    /// The map version searched (after the request's deltas).
+    /// The map version searched: the version the request found, plus one for each
+    /// of its deltas (the version counts deltas, not batches).
     pub map_version: u64,
     /// The candidate x = (ρ, ψ, φ, ψ_v): m, rad, rad, rad.
     pub x: [f64; 4],
@@ -449,6 +487,17 @@ pub(crate) unsafe fn write<T>(ptr: *mut T, what: &str, value: T) -> Result<(), F
     Ok(())
 }
 
+/// Writes `value` through an optional output pointer (NULL: not wanted).
+///
+/// # Safety
+/// `ptr` is NULL or points to memory writable as one `T` (initialised or not).
+pub(crate) unsafe fn write_optional<T>(ptr: *mut T, value: T) {
+    if !ptr.is_null() {
+        // SAFETY: non-null and writable, as the caller promises.
+        unsafe { ptr.write(value) };
+    }
+}
+
 /// Reads a NUL-terminated string argument.
 ///
 /// # Safety
@@ -557,5 +606,54 @@ mod tests {
         let bad_algorithm = dyfos_rendezvous_request { algorithm: 5, ..good };
         // SAFETY: no deltas pointer.
         assert_eq!(unsafe { bad_algorithm.decode() }.unwrap_err().code, DYFOS_STATUS_INVALID_ALGORITHM);
+    }
+
+    /// The request the zeroed belief-set struct decodes to.
+    fn decoded(r: dyfos_rendezvous_request) -> Result<RendezvousRequest, Failure> {
+        let with_belief = dyfos_rendezvous_request {
+            mean: [0.0, 0.0, 0.3],
+            cov: [[0.2, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.05]],
+            map: 7,
+            ..r
+        };
+        // SAFETY: `deltas_json` is NULL or a C string literal.
+        unsafe { with_belief.decode() }
+    }
+
+    #[test]
+    fn a_zeroed_request_is_the_default_request_and_asks_for_any_version() {
+        // SAFETY: every field is a number or a raw pointer, for which zero is valid.
+        let zeroed: dyfos_rendezvous_request = unsafe { std::mem::zeroed() };
+        let from_zero = decoded(zeroed).unwrap();
+        assert_eq!(from_zero.expected_version, None);
+        assert_eq!(from_zero, decoded(dyfos_rendezvous_request::defaults()).unwrap());
+        let at_zero = decoded(dyfos_rendezvous_request { has_expected_version: 1, ..zeroed }).unwrap();
+        assert_eq!(at_zero.expected_version, Some(0));
+        let at_five =
+            decoded(dyfos_rendezvous_request { has_expected_version: 1, expected_version: 5, ..zeroed }).unwrap();
+        assert_eq!(at_five.expected_version, Some(5));
+        let ignored = decoded(dyfos_rendezvous_request { expected_version: 5, ..zeroed }).unwrap();
+        assert_eq!(ignored.expected_version, None);
+        let bad_flag = decoded(dyfos_rendezvous_request { has_expected_version: 2, ..zeroed });
+        assert_eq!(bad_flag.unwrap_err().code, crate::status::DYFOS_STATUS_INVALID_ARGUMENT);
+    }
+
+    #[test]
+    fn deltas_json_that_does_not_parse_is_a_malformed_delta() {
+        for text in [c"[not json", c"{}", c"[{\"Teleport\": {}}]"] {
+            let r = dyfos_rendezvous_request { deltas_json: text.as_ptr(), ..dyfos_rendezvous_request::defaults() };
+            let failure = decoded(r).unwrap_err();
+            assert_eq!(failure.code, DYFOS_STATUS_MALFORMED_DELTA, "{text:?}: {}", failure.message);
+        }
+        let good =
+            dyfos_rendezvous_request { deltas_json: c"[\"Clear\"]".as_ptr(), ..dyfos_rendezvous_request::defaults() };
+        assert_eq!(decoded(good).unwrap().deltas, vec![MapDelta::Clear]);
+    }
+
+    #[test]
+    fn the_batch_limits_are_the_clients() {
+        use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS};
+        assert_eq!(DYFOS_MAX_BATCH_RECORDS as usize, MAX_DELTAS_PER_MESSAGE);
+        assert_eq!(DYFOS_MAX_INLINE_RECORDS as usize, MAX_INLINE_DELTAS);
     }
 }

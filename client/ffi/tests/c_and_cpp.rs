@@ -61,9 +61,10 @@ fn run(cmd: &mut Command) -> Output {
 fn install(prefix: &Path) {
     run(Command::new("bash")
         .arg(crate_dir().join("install.sh"))
-        .arg(prefix)
-        .env("DYFOS_LIB_DIR", lib_dir())
-        .env("DYFOS_INSTALL_SYMLINK", "1"));
+        .arg("--lib-dir")
+        .arg(lib_dir())
+        .arg("--symlink")
+        .arg(prefix));
 }
 
 /// `pkg-config ARGS dyfos` for the installation under `prefix`, split into flags.
@@ -89,7 +90,9 @@ enum Link {
 fn compile(prefix: &Path, source: &Path, out: &Path, link: Link) {
     let cpp = source.extension().is_some_and(|e| e == "cpp");
     let mut cmd = Command::new(if cpp { "c++" } else { "cc" });
-    cmd.arg(if cpp { "-std=c++17" } else { "-std=c11" }).args(["-Wall", "-Wextra", "-Werror", "-O1"]);
+    // The warnings a careful user turns on: the headers must compile clean with them.
+    cmd.arg(if cpp { "-std=c++17" } else { "-std=c11" });
+    cmd.args(["-Wall", "-Wextra", "-Wconversion", "-Wsign-conversion", "-Werror", "-O1"]);
     cmd.arg(source).arg("-o").arg(out);
     cmd.args(pkg_config(prefix, &["--cflags"]));
     match link {
@@ -256,6 +259,90 @@ fn the_cpp_wrapper_answers_like_dyfos_solve_and_throws_each_family() {
     }
 }
 
+/// `readelf -d FILE`'s dynamic section.
+fn dynamic_section(file: &Path) -> String {
+    String::from_utf8(run(Command::new("readelf").arg("-d").arg(file)).stdout).expect("UTF-8")
+}
+
+/// The installed tree: libdyfos.so.<ABI> is the SONAME programs record, and the tree
+/// still works after it is moved (pkg-config's prefix comes from where dyfos.pc lies).
+#[test]
+fn the_installed_library_has_a_soname_and_a_relocatable_pkg_config_file() {
+    let scratch = Scratch::new("relocate");
+    let first = scratch.0.join("first");
+    run(Command::new("bash").arg(crate_dir().join("install.sh")).arg("--lib-dir").arg(lib_dir()).arg(&first));
+    let soname = format!("libdyfos.so.{}", dyfos::DYFOS_ABI_VERSION);
+    assert!(first.join("lib").join(&soname).is_file(), "{soname} is installed");
+    assert_eq!(std::fs::read_link(first.join("lib/libdyfos.so")).expect("a link"), Path::new(&soname));
+    let library = dynamic_section(&first.join("lib").join(&soname));
+    assert!(library.contains(&format!("Library soname: [{soname}]")), "{library}");
+
+    let moved = scratch.0.join("moved");
+    std::fs::rename(&first, &moved).expect("move the installed tree");
+    let cflags = pkg_config(&moved, &["--cflags"]).join(" ");
+    let libs = pkg_config(&moved, &["--libs"]).join(" ");
+    for flags in [&cflags, &libs] {
+        assert!(flags.contains(&moved.display().to_string()), "{flags}");
+        assert!(!flags.contains(&first.display().to_string()), "{flags}");
+    }
+    let program = scratch.0.join("query_c");
+    compile(&moved, &crate_dir().join("examples/query.c"), &program, Link::Shared);
+    let needed = dynamic_section(&program);
+    assert!(needed.contains(&format!("Shared library: [{soname}]")), "{needed}");
+    // It loads the moved library and runs: here it finds no daemon.
+    let out = Command::new(&program)
+        .arg(data("example.json"))
+        .args(["dyfos-ffi-nobody/", &format!("dyt{}_reloc_", std::process::id())])
+        .output()
+        .expect("run the example");
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no_daemon"), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// Without `--lib-dir`, install.sh installs the workspace's built release library as
+/// it is: it never runs cargo (which would rebuild it with other features and
+/// replace the workspace's), so a `cargo` that fails does not matter.
+#[test]
+fn install_takes_the_built_library_without_running_cargo() {
+    let scratch = Scratch::new("no-rebuild");
+    let target = scratch.0.join("target");
+    let release = target.join("release");
+    std::fs::create_dir_all(&release).expect("release dir");
+    for lib in ["libdyfos.so", "libdyfos.a"] {
+        std::fs::copy(lib_dir().join(lib), release.join(lib)).expect("copy the built library");
+    }
+    let bin = scratch.0.join("bin");
+    std::fs::create_dir_all(&bin).expect("bin dir");
+    let marker = scratch.0.join("cargo-ran");
+    let fake_cargo = bin.join("cargo");
+    std::fs::write(&fake_cargo, format!("#!/bin/sh\ntouch '{}'\nexit 1\n", marker.display())).expect("fake cargo");
+    run(Command::new("chmod").arg("+x").arg(&fake_cargo));
+    let path = format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default());
+    let prefix = scratch.0.join("prefix");
+    let installed = |cmd: &mut Command| {
+        cmd.env("CARGO_TARGET_DIR", &target).env("PATH", &path).env_remove("DYFOS_LIB_DIR");
+        run(cmd)
+    };
+    installed(Command::new("bash").arg(crate_dir().join("install.sh")).arg(&prefix));
+    assert!(!marker.exists(), "install.sh ran cargo although a built library was there");
+    let soname = format!("libdyfos.so.{}", dyfos::DYFOS_ABI_VERSION);
+    for (built, copy) in [("libdyfos.so", soname.as_str()), ("libdyfos.a", "libdyfos.a")] {
+        let same = std::fs::read(release.join(built)).ok() == std::fs::read(prefix.join("lib").join(copy)).ok();
+        assert!(same, "{copy} is not the built {built}");
+    }
+    // An explicit library directory that lacks the library is an error, not a build.
+    let missing = Command::new("bash")
+        .arg(crate_dir().join("install.sh"))
+        .args(["--lib-dir", "/nonexistent-dyfos-libs"])
+        .arg(&prefix)
+        .env("PATH", &path)
+        .output()
+        .expect("run install.sh");
+    assert!(!missing.status.success());
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("/nonexistent-dyfos-libs/libdyfos.so does not exist"));
+    assert!(!marker.exists());
+}
+
 /// The CMake package: `find_package(dyfos)` finds the installed library, and the C++
 /// example (shared) and the C example (static) build and run against a daemon.
 /// Needs cmake, which the CI machine lacks: `client/ffi/test.sh --cmake` installs it
@@ -271,9 +358,12 @@ fn the_cmake_package_finds_the_library() {
     for file in ["query.c", "query.cpp"] {
         std::fs::copy(crate_dir().join("examples").join(file), app.join(file)).expect("copy the example");
     }
+    // A version this package is not (another major) is refused; 0.1 is found.
     std::fs::write(
         app.join("CMakeLists.txt"),
-        "cmake_minimum_required(VERSION 3.16)\nproject(dyfos_query C CXX)\nfind_package(dyfos REQUIRED)\n\
+        "cmake_minimum_required(VERSION 3.16)\nproject(dyfos_query C CXX)\n\
+         find_package(dyfos 1.0 QUIET)\nif(dyfos_FOUND)\n  message(FATAL_ERROR \"dyfos 1.0 found\")\nendif()\n\
+         find_package(dyfos 0.1 REQUIRED)\n\
          add_executable(query_cpp query.cpp)\nset_target_properties(query_cpp PROPERTIES CXX_STANDARD 17)\n\
          target_link_libraries(query_cpp PRIVATE dyfos::dyfos)\n\
          add_executable(query_c_static query.c)\ntarget_link_libraries(query_c_static PRIVATE dyfos::dyfos_static)\n",

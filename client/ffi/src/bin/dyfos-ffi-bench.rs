@@ -148,7 +148,7 @@ fn run() -> Result<(), String> {
         let mut version = 0u64;
         let start = Instant::now();
         // SAFETY: a live handle, an initialised request without deltas, a local output.
-        let status = unsafe { dyfos_client_check(handle, &c_request, &mut version) };
+        let status = unsafe { dyfos_client_check(handle, 0, &c_request, &mut version) };
         let nanos = start.elapsed().as_nanos() as u64;
         if status != DYFOS_STATUS_OK {
             return Err(format!("dyfos_client_check: status {status}"));

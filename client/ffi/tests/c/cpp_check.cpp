@@ -57,15 +57,29 @@ int main(int argc, char** argv) {
   const std::string prefix = argv[2], domain = argv[3];
   static_assert(!std::is_copy_constructible_v<dyfos::Client>, "a Client is move-only");
   static_assert(std::is_nothrow_move_constructible_v<dyfos::Client>, "a Client moves");
+  static_assert(std::is_default_constructible_v<dyfos::Answer>, "an Answer can be declared before it is assigned");
+  static_assert(std::is_unsigned_v<decltype(DYFOS_PARAM_LAMBDA)> && std::is_unsigned_v<decltype(DYFOS_PARAMS_ALL_SET)>,
+                "the parameter bits are unsigned, like dyfos_params.set");
+  static_assert(std::is_unsigned_v<decltype(DYFOS_STATUS_NULL_PARAMETER)>, "status codes are dyfos_status values");
 
   EXPECT_THROW(dyfos::Client("dyfos-ffi-nobody/", domain, std::chrono::milliseconds(50)), dyfos::DaemonGoneError,
                DYFOS_STATUS_NO_DAEMON);
   EXPECT_THROW(dyfos::Client("bad prefix", domain), dyfos::InvalidRequestError, DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT_THROW(dyfos::Client(prefix, domain, std::chrono::milliseconds(-5)), dyfos::InvalidRequestError,
+               DYFOS_STATUS_INVALID_ARGUMENT);
 
   dyfos::Client first(prefix, domain, std::chrono::seconds(60));
   dyfos::Client client = std::move(first);  // the moved-from object holds nothing
   EXPECT_TRUE(first.handle() == nullptr && client.handle() != nullptr);
   EXPECT_THROW(first.stats_json(), dyfos::InvalidRequestError, DYFOS_STATUS_NULL_PARAMETER);
+  try {
+    first.snapshot(1);
+  } catch (const dyfos::Error& e) {
+    // Says what happened in C++ terms, not which C pointer was NULL.
+    EXPECT_TRUE(std::string(e.what()).find("moved from") != std::string::npos);
+    EXPECT_TRUE(std::string(e.what()).find("snapshot") != std::string::npos);
+    EXPECT_TRUE(std::string(e.what()).find("NULL") == std::string::npos);
+  }
   EXPECT_TRUE(client.stats_json().find("\"pid\":") != std::string::npos);
 
   auto [map, version] = client.upload_scenario(scenario);
@@ -81,6 +95,11 @@ int main(int argc, char** argv) {
   request.seed = 2;
   std::cout << "--- answer random 2\n" << client.rendezvous(request).to_json() << "\n";
   EXPECT_TRUE(client.check(request) == version);
+
+  // The queries are const: callable on a const Client (and from several threads).
+  const dyfos::Client& view = client;
+  EXPECT_TRUE(view.check(request) == version && view.stats_json().find("\"maps\":") != std::string::npos);
+  EXPECT_TRUE(same(view.rendezvous(request), client.rendezvous(request)));
 
   // One client shared by threads: their calls are serialised, each gets its reply.
   {
@@ -110,6 +129,23 @@ int main(int argc, char** argv) {
   EXPECT_TRUE(!same(narrowed, client.rendezvous(defaulted)) && narrowed.x()[0] <= 4.0);
   EXPECT_THROW(dyfos::Params::from_json("{\"rho_mim\": 1}"), dyfos::InvalidRequestError,
                DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT_THROW(dyfos::Params::from_json("{\"rho_min\": 9}"), dyfos::InvalidRequestError, DYFOS_STATUS_INVALID_PARAMS);
+
+  // Params getters: the value a request uses, the field if given, else the default.
+  {
+    dyfos::Params p;
+    EXPECT_TRUE(p.lambda() == 3.0 && p.rho_max() == 6.0 && p.model() == dyfos::Model::Paper && !p.is_set(DYFOS_PARAM_LAMBDA));
+    p.lambda(2.0).t_vs({0.5, 0.0, 0.0});
+    EXPECT_TRUE(p.lambda() == 2.0 && p.is_set(DYFOS_PARAM_LAMBDA | DYFOS_PARAM_T_VS) && p.t_vs()[0] == 0.5);
+    dyfos_params garbage{};
+    garbage.lambda = -1.0;  // ignored: its bit is clear
+    EXPECT_TRUE(dyfos::Params::from_raw(garbage).lambda() == 3.0);
+    EXPECT_TRUE(dyfos::Params::from_json("{\"kappa\": 2.5}").kappa() == 2.5);
+  }
+  dyfos::Answer empty;
+  EXPECT_TRUE(empty.cost() == 0.0 && empty.map_version() == 0);
+  empty = narrowed;
+  EXPECT_TRUE(same(empty, narrowed));
 
   // Each family as its exception.
   dyfos::RendezvousRequest bad = request;
@@ -132,7 +168,16 @@ int main(int argc, char** argv) {
   std::string many = "[";
   for (int i = 0; i < 1100; ++i) many += i ? ",\"Clear\"" : "\"Clear\"";
   bad.deltas_json = many + "]";
-  EXPECT_THROW(client.rendezvous(bad), dyfos::BusyError, DYFOS_STATUS_OVER_CAPACITY);
+  // Too many records: its own error, not "busy" (a retry cannot help).
+  EXPECT_THROW(client.rendezvous(bad), dyfos::OverCapacityError, DYFOS_STATUS_OVER_CAPACITY);
+  bad = request;
+  bad.deadline = std::chrono::microseconds(-5);  // not wrapped to 2^64 - 5 us
+  EXPECT_THROW(client.rendezvous(bad), dyfos::InvalidRequestError, DYFOS_STATUS_INVALID_DEADLINE);
+  bad.deadline = std::chrono::microseconds(0);
+  EXPECT_THROW(client.check(bad), dyfos::InvalidRequestError, DYFOS_STATUS_INVALID_DEADLINE);
+  bad = request;
+  bad.budget = 0;
+  EXPECT_THROW(client.rendezvous(bad), dyfos::InvalidRequestError, DYFOS_STATUS_MALFORMED_REQUEST);
   const std::uint64_t tiny = 888000 + map % 1000;
   EXPECT_TRUE(client.create_map(tiny, {-0.2, -0.2, 0.2, 0.2}, 0.7, 2.1) == 0);
   EXPECT_THROW(client.create_map(tiny, {-0.2, -0.2, 0.2, 0.2}, 0.7, 2.1), dyfos::InvalidRequestError,
@@ -144,6 +189,26 @@ int main(int argc, char** argv) {
   EXPECT_THROW(client.apply(tiny, "[\"Clear\"]", 5), dyfos::VersionMismatchError, DYFOS_STATUS_MAP_VERSION_MISMATCH);
   EXPECT_TRUE(client.apply(tiny, "[\"Clear\"]", 0) == 1);
   EXPECT_TRUE(client.snapshot(tiny).find("\"version\": 1") != std::string::npos);
+  EXPECT_TRUE(client.apply(tiny, "[\"Clear\", \"Clear\"]", 1) == 3);  // the version counts deltas
+  {
+    std::string batch = "[";
+    for (std::uint32_t i = 0; i <= DYFOS_MAX_BATCH_RECORDS; ++i) batch += i ? ",\"Clear\"" : "\"Clear\"";
+    EXPECT_THROW(client.apply(tiny, batch + "]"), dyfos::OverCapacityError, DYFOS_STATUS_OVER_CAPACITY);
+  }
+  EXPECT_THROW(client.apply(tiny, "[not json"), dyfos::InvalidRequestError, DYFOS_STATUS_MALFORMED_DELTA);
+  EXPECT_THROW(client.create_map(tiny + 1, {1.0, 1.0, -1.0, -1.0}, 0.7, 2.1), dyfos::InvalidRequestError,
+               DYFOS_STATUS_INVALID_DELTA);
+  EXPECT_THROW(client.delete_map(tiny, 2), dyfos::VersionMismatchError, DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  client.delete_map(tiny, 3);
+  EXPECT_THROW(client.snapshot(tiny), dyfos::UnknownMapError, DYFOS_STATUS_UNKNOWN_MAP);
+  // A timeout for one call; not positive is refused before anything is sent.
+  bad = request;
+  bad.algorithm = dyfos::Algorithm::Brute;
+  bad.deadline = std::chrono::seconds(2);
+  EXPECT_THROW(client.rendezvous(bad, std::chrono::milliseconds(1)), dyfos::TimeoutError, DYFOS_STATUS_TIMEOUT);
+  EXPECT_THROW(client.check(request, std::chrono::milliseconds(-1)), dyfos::InvalidRequestError,
+               DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT_TRUE(client.check(request, std::chrono::seconds(30)) == version);
   {
     dyfos::Client hasty(prefix, domain, std::chrono::milliseconds(1));
     bad = request;
@@ -151,6 +216,11 @@ int main(int argc, char** argv) {
     bad.deadline = std::chrono::seconds(2);
     EXPECT_THROW(hasty.rendezvous(bad), dyfos::TimeoutError, DYFOS_STATUS_TIMEOUT);
   }
+  // The scenario's map changed by a delta: re-uploaded only with replace.
+  EXPECT_TRUE(client.apply(map, "[{\"SetSun\": {\"elevation\": 0.3, \"azimuth\": 1.0}}]", version) == version + 1);
+  EXPECT_THROW(client.upload_scenario(scenario), dyfos::InvalidRequestError, DYFOS_STATUS_MAP_EXISTS);
+  auto replaced = client.upload_scenario(scenario, true);
+  EXPECT_TRUE(replaced.map == map && replaced.version == version + 2);
 
   std::cout << "--- kill" << std::endl;
   std::string line;

@@ -82,7 +82,7 @@ static int same_answer(dyfos_answer a, dyfos_answer b) {
 
 static void print_answer(dyfos_client *client, const dyfos_rendezvous_request *request, const char *algorithm) {
   dyfos_answer answer;
-  dyfos_status s = dyfos_client_rendezvous(client, request, &answer);
+  dyfos_status s = dyfos_client_rendezvous(client, 0, request, &answer);
   EXPECT(s, DYFOS_STATUS_OK);
   if (s != DYFOS_STATUS_OK) return;
   char *json = NULL;
@@ -116,16 +116,16 @@ int main(int argc, char **argv) {
 
   /* Stats. */
   char *stats = NULL;
-  EXPECT(dyfos_client_stats(client, &stats), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_stats(client, 0, &stats), DYFOS_STATUS_OK);
   EXPECT_TRUE(stats != NULL && strstr(stats, "\"pid\":") != NULL && strstr(stats, "\"maps\":") != NULL);
   dyfos_string_free(stats);
 
   /* The scenario's map: uploaded once, then reused. */
   uint64_t map = 0, version = 99, again = 0, version_again = 99;
-  EXPECT(dyfos_client_upload_scenario(client, scenario, &map, &version), DYFOS_STATUS_OK);
-  EXPECT(dyfos_client_upload_scenario(client, scenario, &again, &version_again), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_upload_scenario(client, 0, scenario, 0, &map, &version), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_upload_scenario(client, 0, scenario, 0, &again, &version_again), DYFOS_STATUS_OK);
   EXPECT_TRUE(map == again && version == 0 && version_again == 0);
-  EXPECT(dyfos_client_upload_scenario(client, "{\"bounds\": [", &again, NULL), DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT(dyfos_client_upload_scenario(client, 0, "{\"bounds\": [", 0, &again, NULL), DYFOS_STATUS_INVALID_ARGUMENT);
 
   /* An OctoMap .bt: uploaded, a truncated copy refused before sending, replaced. */
   const char *bt_path = getenv("DYFOS_TEST_OCTOMAP");
@@ -135,27 +135,28 @@ int main(int argc, char **argv) {
     EXPECT_TRUE(bt != NULL && bt_len > 100);
     double origin[3] = {0.0, 0.0, 0.32}, area[4] = {-12.0, -8.0, 31.0, 10.0};
     uint64_t at = 99;
-    EXPECT(dyfos_client_upload_octomap(client, 0xB7, bt, bt_len, origin, area, 0.6, 2.4, 0, &at), DYFOS_STATUS_OK);
+    EXPECT(dyfos_client_upload_octomap(client, 0, 0xB7, bt, bt_len, origin, area, 0.6, 2.4, 0, &at), DYFOS_STATUS_OK);
     EXPECT_TRUE(at == 0);
-    EXPECT(dyfos_client_upload_octomap(client, 0xB8, bt, bt_len - 1, origin, area, 0.6, 2.4, 0, NULL),
+    EXPECT(dyfos_client_upload_octomap(client, 0, 0xB8, bt, bt_len - 1, origin, area, 0.6, 2.4, 0, NULL),
            DYFOS_STATUS_INVALID_DELTA);
-    EXPECT(dyfos_client_upload_octomap(client, 0xB8, NULL, 0, origin, area, 0.6, 2.4, 0, NULL),
+    EXPECT(dyfos_client_upload_octomap(client, 0, 0xB8, NULL, 0, origin, area, 0.6, 2.4, 0, NULL),
            DYFOS_STATUS_NULL_PARAMETER);
-    EXPECT(dyfos_client_upload_octomap(client, 0xB7, bt, bt_len, origin, area, 0.6, 2.4, 0, NULL),
+    EXPECT(dyfos_client_upload_octomap(client, 0, 0xB7, bt, bt_len, origin, area, 0.6, 2.4, 0, NULL),
            DYFOS_STATUS_MAP_EXISTS);
-    EXPECT(dyfos_client_upload_octomap(client, 0xB8, bt, bt_len, origin, area, 0.6, 2.4, 2, NULL),
+    EXPECT(dyfos_client_upload_octomap(client, 0, 0xB8, bt, bt_len, origin, area, 0.6, 2.4, 2, NULL),
            DYFOS_STATUS_INVALID_ARGUMENT);
-    EXPECT(dyfos_client_upload_octomap(client, 0xB7, bt, bt_len, NULL, area, 0.6, 2.4, 1, &at), DYFOS_STATUS_OK);
+    EXPECT(dyfos_client_upload_octomap(client, 0, 0xB7, bt, bt_len, NULL, area, 0.6, 2.4, 1, &at), DYFOS_STATUS_OK);
     printf("--- octomap\nversion=%llu\n", (unsigned long long)at);
     free(bt);
   }
-  EXPECT(dyfos_client_upload_scenario(client, NULL, &again, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_upload_scenario(client, 0, NULL, 0, &again, NULL), DYFOS_STATUS_NULL_PARAMETER);
 
   /* Answers, compared with `dyfos solve` by the driver. */
   dyfos_rendezvous_request request;
   EXPECT(dyfos_rendezvous_request_from_scenario(scenario, map, &request), DYFOS_STATUS_OK);
   EXPECT_TRUE(request.params.set == DYFOS_PARAMS_ALL_SET && request.map == map);
   request.seed = 7;
+  request.has_expected_version = 1;
   request.expected_version = version;
   print_answer(client, &request, "dyfos");
   request.algorithm = DYFOS_ALGORITHM_CENTER;
@@ -170,7 +171,7 @@ int main(int argc, char **argv) {
   dyfos_rendezvous_request defaulted;
   EXPECT(dyfos_rendezvous_request_init(&defaulted), DYFOS_STATUS_OK);
   EXPECT_TRUE(defaulted.params.set == 0 && defaulted.algorithm == DYFOS_ALGORITHM_DYFOS && defaulted.seed == 0 &&
-              defaulted.expected_version == DYFOS_ANY_VERSION && defaulted.deltas_json == NULL);
+              defaulted.has_expected_version == 0 && defaulted.deltas_json == NULL);
   dyfos_params from_json;
   EXPECT(dyfos_params_from_json("{}", &from_json), DYFOS_STATUS_OK);
   EXPECT(dyfos_params_from_json("{\"rho_mim\": 2}", &from_json), DYFOS_STATUS_INVALID_ARGUMENT);
@@ -184,9 +185,9 @@ int main(int argc, char **argv) {
   /* Every field up to `set` (the struct's tail padding is not compared). */
   EXPECT_TRUE(memcmp(&request.params, &from_json, offsetof(dyfos_params, set) + sizeof from_json.set) == 0);
   dyfos_answer left_out, given, repeated;
-  EXPECT(dyfos_client_rendezvous(client, &defaulted, &left_out), DYFOS_STATUS_OK);
-  EXPECT(dyfos_client_rendezvous(client, &explicit_defaults, &given), DYFOS_STATUS_OK);
-  EXPECT(dyfos_client_rendezvous(client, &defaulted, &repeated), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_rendezvous(client, 0, &defaulted, &left_out), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_rendezvous(client, 0, &explicit_defaults, &given), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_rendezvous(client, 0, &defaulted, &repeated), DYFOS_STATUS_OK);
   EXPECT_TRUE(same_answer(left_out, given));
   EXPECT_TRUE(same_answer(left_out, repeated));
   EXPECT_TRUE(left_out.algorithm == DYFOS_ALGORITHM_DYFOS && left_out.map_version == version);
@@ -195,50 +196,50 @@ int main(int argc, char **argv) {
   one_param.params.rho_max = 4.0;
   one_param.params.set = DYFOS_PARAM_RHO_MAX;
   dyfos_answer changed;
-  EXPECT(dyfos_client_rendezvous(client, &one_param, &changed), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_rendezvous(client, 0, &one_param, &changed), DYFOS_STATUS_OK);
   EXPECT_TRUE(!same_answer(left_out, changed) && changed.x[0] <= 4.0);
 
   /* Check mode. */
   uint64_t checked = 99;
-  EXPECT(dyfos_client_check(client, &request, &checked), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_check(client, 0, &request, &checked), DYFOS_STATUS_OK);
   EXPECT_TRUE(checked == version);
 
   /* Every error family. */
   dyfos_answer answer;
   dyfos_rendezvous_request bad = request;
   bad.map = 424242;
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_UNKNOWN_MAP);
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_UNKNOWN_MAP);
   char message[512];
   EXPECT_TRUE(dyfos_last_error(message, sizeof message) > 0 && strstr(message, "424242") != NULL);
   bad = request;
   bad.expected_version = version + 5;
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_MAP_VERSION_MISMATCH);
-  EXPECT(dyfos_client_check(client, &bad, &checked), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  EXPECT(dyfos_client_check(client, 0, &bad, &checked), DYFOS_STATUS_MAP_VERSION_MISMATCH);
   bad = request;
   bad.cov[0][1] = 0.3; /* not symmetric */
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_BELIEF);
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_INVALID_BELIEF);
   bad = request;
   bad.algorithm = 9;
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_ALGORITHM);
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_INVALID_ALGORITHM);
   bad = request;
   bad.params.rho_min = 9.0; /* > rho_max */
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_PARAMS);
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_INVALID_PARAMS);
   EXPECT_TRUE(dyfos_last_error(message, sizeof message) > 0 && strstr(message, "rho_min") != NULL);
   bad = request;
   bad.params.set = 1u << 20;
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_PARAMS);
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_INVALID_PARAMS);
   bad = request;
   bad.deadline_micros = 3600000001ull;
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_DEADLINE);
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_INVALID_DEADLINE);
   bad = request;
   bad.algorithm = DYFOS_ALGORITHM_BRUTE;
   bad.deadline_micros = 1; /* passes before a worker takes it */
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_DEADLINE_EXCEEDED);
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_DEADLINE_EXCEEDED);
   bad = request;
   bad.deltas_json = "[{\"RemoveObstacle\": {\"id\": 404}}]";
-  EXPECT(dyfos_client_check(client, &bad, &checked), DYFOS_STATUS_INVALID_DELTA);
+  EXPECT(dyfos_client_check(client, 0, &bad, &checked), DYFOS_STATUS_INVALID_DELTA);
   bad.deltas_json = "[not json";
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_MALFORMED_DELTA);
   {
     /* More inline deltas than a request may carry: over capacity, refused before sending. */
     size_t n = 1100;
@@ -247,37 +248,88 @@ int main(int argc, char **argv) {
     for (size_t i = 0; i < n; i++) strcat(many, i ? ",\"Clear\"" : "\"Clear\"");
     strcat(many, "]");
     bad.deltas_json = many;
-    EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_OVER_CAPACITY);
+    EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_OVER_CAPACITY);
     free(many);
   }
 
   /* A small map of our own: no pose is feasible in it. */
   const double tiny[4] = {-0.2, -0.2, 0.2, 0.2};
   uint64_t tiny_map = 777000 + (uint64_t)(map % 1000), tiny_version = 99;
-  EXPECT(dyfos_client_create_map(client, tiny_map, tiny, 0.7, 2.1, &tiny_version), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_create_map(client, 0, tiny_map, tiny, 0.7, 2.1, &tiny_version), DYFOS_STATUS_OK);
   EXPECT_TRUE(tiny_version == 0);
-  EXPECT(dyfos_client_create_map(client, tiny_map, tiny, 0.7, 2.1, NULL), DYFOS_STATUS_MAP_EXISTS);
+  EXPECT(dyfos_client_create_map(client, 0, tiny_map, tiny, 0.7, 2.1, NULL), DYFOS_STATUS_MAP_EXISTS);
   const double inverted[4] = {1.0, 1.0, -1.0, -1.0};
-  EXPECT(dyfos_client_create_map(client, tiny_map + 1, inverted, 0.7, 2.1, NULL), DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT(dyfos_client_create_map(client, 0, tiny_map + 1, inverted, 0.7, 2.1, NULL), DYFOS_STATUS_INVALID_DELTA);
+  /* The same check gives the same code whichever call makes it: a sun below the
+   * horizon's limit, as an argument here and as a delta the daemon checks. */
+  EXPECT(dyfos_client_create_map(client, 0, tiny_map + 1, tiny, 5.0, 2.1, NULL), DYFOS_STATUS_INVALID_DELTA);
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[{\"SetSun\": {\"elevation\": 5.0, \"azimuth\": 2.1}}]",
+                            DYFOS_ANY_VERSION, NULL),
+         DYFOS_STATUS_INVALID_DELTA);
   bad = request;
   bad.map = tiny_map;
-  bad.expected_version = DYFOS_ANY_VERSION;
-  EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_NO_FEASIBLE_POSE);
+  bad.has_expected_version = 0;
+  EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_NO_FEASIBLE_POSE);
   uint64_t applied = 99;
-  EXPECT(dyfos_client_apply(client, tiny_map, "[{\"RemoveObstacle\": {\"id\": 5}}]", DYFOS_ANY_VERSION, &applied),
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[{\"RemoveObstacle\": {\"id\": 5}}]", DYFOS_ANY_VERSION, &applied),
          DYFOS_STATUS_INVALID_DELTA);
-  EXPECT(dyfos_client_apply(client, tiny_map, "[\"Clear\"]", 3, &applied), DYFOS_STATUS_MAP_VERSION_MISMATCH);
-  EXPECT(dyfos_client_apply(client, tiny_map, "{}", 0, &applied), DYFOS_STATUS_INVALID_ARGUMENT);
-  EXPECT(dyfos_client_apply(client, 424242, "[\"Clear\"]", DYFOS_ANY_VERSION, &applied), DYFOS_STATUS_UNKNOWN_MAP);
-  EXPECT(dyfos_client_apply(client, tiny_map, "[\"Clear\"]", 0, &applied), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[\"Clear\"]", 3, &applied), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "{}", 0, &applied), DYFOS_STATUS_MALFORMED_DELTA);
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[{\"Teleport\": 1}]", 0, &applied), DYFOS_STATUS_MALFORMED_DELTA);
+  EXPECT(dyfos_client_apply(client, 0, 424242, "[\"Clear\"]", DYFOS_ANY_VERSION, &applied), DYFOS_STATUS_UNKNOWN_MAP);
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[\"Clear\"]", 0, &applied), DYFOS_STATUS_OK);
   EXPECT_TRUE(applied == 1);
+  /* A request zeroed with {0} asks for any version (the map is at 1 now). */
+  {
+    dyfos_rendezvous_request zeroed = {0};
+    zeroed.map = tiny_map;
+    memcpy(zeroed.mean, request.mean, sizeof request.mean);
+    memcpy(zeroed.cov, request.cov, sizeof request.cov);
+    checked = 99;
+    EXPECT(dyfos_client_check(client, 0, &zeroed, &checked), DYFOS_STATUS_OK);
+    EXPECT_TRUE(checked == 1);
+    zeroed.has_expected_version = 1; /* and expected_version 0: a real version, not "any" */
+    EXPECT(dyfos_client_check(client, 0, &zeroed, &checked), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+    zeroed.expected_version = 1;
+    EXPECT(dyfos_client_check(client, 0, &zeroed, NULL), DYFOS_STATUS_OK); /* the version is optional */
+    zeroed.has_expected_version = 2;
+    EXPECT(dyfos_client_check(client, 0, &zeroed, NULL), DYFOS_STATUS_INVALID_ARGUMENT);
+  }
   char *snapshot = NULL;
-  EXPECT(dyfos_client_snapshot(client, tiny_map, &snapshot), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_snapshot(client, 0, tiny_map, &snapshot), DYFOS_STATUS_OK);
   if (snapshot) printf("--- snapshot %llu\n%s\n", (unsigned long long)tiny_map, snapshot);
   dyfos_string_free(snapshot);
   snapshot = NULL;
-  EXPECT(dyfos_client_snapshot(client, 424242, &snapshot), DYFOS_STATUS_UNKNOWN_MAP);
+  EXPECT(dyfos_client_snapshot(client, 0, 424242, &snapshot), DYFOS_STATUS_UNKNOWN_MAP);
   EXPECT_TRUE(snapshot == NULL);
+
+  /* The version counts deltas, not batches; deleting frees the id. */
+  {
+    uint64_t counted = tiny_map + 2, at = 99;
+    EXPECT(dyfos_client_create_map(client, 0, counted, tiny, 0.7, 2.1, NULL), DYFOS_STATUS_OK);
+    EXPECT(dyfos_client_apply(client, 0, counted, "[\"Clear\", \"Clear\", \"Clear\"]", 0, &at), DYFOS_STATUS_OK);
+    EXPECT_TRUE(at == 3);
+    EXPECT(dyfos_client_apply(client, 0, counted, "[]", 3, &at), DYFOS_STATUS_OK);
+    EXPECT_TRUE(at == 3); /* an empty batch changes nothing */
+    EXPECT(dyfos_client_apply(client, 0, counted,
+                              "[{\"SetSun\": {\"elevation\": 0.5, \"azimuth\": 1.0}}, \"Clear\"]", 3, &at),
+           DYFOS_STATUS_OK);
+    EXPECT_TRUE(at == 5);
+    EXPECT(dyfos_client_delete_map(client, 0, counted, 4), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+    EXPECT(dyfos_client_delete_map(client, 0, counted, 5), DYFOS_STATUS_OK);
+    EXPECT(dyfos_client_delete_map(client, 0, counted, DYFOS_ANY_VERSION), DYFOS_STATUS_UNKNOWN_MAP);
+    EXPECT(dyfos_client_snapshot(client, 0, counted, &snapshot), DYFOS_STATUS_UNKNOWN_MAP);
+    EXPECT(dyfos_client_create_map(client, 0, counted, tiny, 0.7, 2.1, &at), DYFOS_STATUS_OK);
+    EXPECT_TRUE(at == 0);
+    EXPECT(dyfos_client_delete_map(client, 0, counted, DYFOS_ANY_VERSION), DYFOS_STATUS_OK);
+  }
+
+  /* A timeout for one call, shorter than the handle's (60 s). */
+  bad = request;
+  bad.algorithm = DYFOS_ALGORITHM_BRUTE;
+  bad.deadline_micros = 2000000;
+  EXPECT(dyfos_client_rendezvous(client, 1, &bad, &answer), DYFOS_STATUS_TIMEOUT);
+  EXPECT(dyfos_client_check(client, 0, &request, &checked), DYFOS_STATUS_OK); /* the handle goes on */
 
   /* A reply later than the handle's timeout. */
   dyfos_client *hasty = NULL;
@@ -285,29 +337,37 @@ int main(int argc, char **argv) {
   bad = request;
   bad.algorithm = DYFOS_ALGORITHM_BRUTE;
   bad.deadline_micros = 2000000;
-  EXPECT(dyfos_client_rendezvous(hasty, &bad, &answer), DYFOS_STATUS_TIMEOUT);
+  EXPECT(dyfos_client_rendezvous(hasty, 0, &bad, &answer), DYFOS_STATUS_TIMEOUT);
   EXPECT(dyfos_client_free(hasty), DYFOS_STATUS_OK);
 
   /* NULL and freed handles, NULL inputs and outputs: the null-parameter code. */
   char *out = NULL;
-  EXPECT(dyfos_client_stats(NULL, &out), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_stats(hasty, &out), DYFOS_STATUS_NULL_PARAMETER); /* freed above */
+  EXPECT(dyfos_client_stats(NULL, 0, &out), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_stats(hasty, 0, &out), DYFOS_STATUS_NULL_PARAMETER); /* freed above */
+  /* The handle is checked first: a NULL or freed handle with bad inputs is the handle's error. */
+  EXPECT(dyfos_client_upload_scenario(NULL, 0, "{}", 0, &again, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  bad = request;
+  bad.mean[0] = strtod("nan", NULL);
+  EXPECT(dyfos_client_check(hasty, 0, &bad, &checked), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_check(client, 0, &bad, &checked), DYFOS_STATUS_INVALID_BELIEF);
+  EXPECT(dyfos_client_create_map(hasty, 0, 5, inverted, 9.0, 2.1, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_apply(hasty, 0, tiny_map, "[not json", DYFOS_ANY_VERSION, NULL), DYFOS_STATUS_NULL_PARAMETER);
   EXPECT(dyfos_client_free(hasty), DYFOS_STATUS_NULL_PARAMETER);        /* double free, detected */
   EXPECT(dyfos_client_free(NULL), DYFOS_STATUS_OK);
-  EXPECT(dyfos_client_stats(client, NULL), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_rendezvous(NULL, &request, &answer), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_rendezvous(client, NULL, &answer), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_rendezvous(client, &request, NULL), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_check(client, &request, NULL), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_check(NULL, &request, &checked), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_upload_scenario(client, scenario, NULL, NULL), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_upload_scenario(NULL, scenario, &again, NULL), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_create_map(NULL, 5, tiny, 0.7, 2.1, NULL), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_create_map(client, 5, NULL, 0.7, 2.1, NULL), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_apply(NULL, tiny_map, "[]", DYFOS_ANY_VERSION, NULL), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_apply(client, tiny_map, NULL, DYFOS_ANY_VERSION, NULL), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_snapshot(NULL, tiny_map, &out), DYFOS_STATUS_NULL_PARAMETER);
-  EXPECT(dyfos_client_snapshot(client, tiny_map, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_stats(client, 0, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_rendezvous(NULL, 0, &request, &answer), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_rendezvous(client, 0, NULL, &answer), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_rendezvous(client, 0, &request, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_check(client, 0, &request, NULL), DYFOS_STATUS_OK); /* map_version_out may be NULL */
+  EXPECT(dyfos_client_check(NULL, 0, &request, &checked), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_upload_scenario(client, 0, scenario, 0, NULL, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_upload_scenario(NULL, 0, scenario, 0, &again, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_create_map(NULL, 0, 5, tiny, 0.7, 2.1, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_create_map(client, 0, 5, NULL, 0.7, 2.1, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_apply(NULL, 0, tiny_map, "[]", DYFOS_ANY_VERSION, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, NULL, DYFOS_ANY_VERSION, NULL), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_snapshot(NULL, 0, tiny_map, &out), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_snapshot(client, 0, tiny_map, NULL), DYFOS_STATUS_NULL_PARAMETER);
   EXPECT(dyfos_answer_to_json(NULL, &out), DYFOS_STATUS_NULL_PARAMETER);
   EXPECT(dyfos_answer_to_json(&left_out, NULL), DYFOS_STATUS_NULL_PARAMETER);
   EXPECT(dyfos_rendezvous_request_init(NULL), DYFOS_STATUS_NULL_PARAMETER);
@@ -316,24 +376,54 @@ int main(int argc, char **argv) {
   EXPECT(dyfos_params_from_json(NULL, &from_json), DYFOS_STATUS_NULL_PARAMETER);
   EXPECT_TRUE(out == NULL);
   dyfos_string_free(NULL);
+  /* Freeing a string is no call that fails or succeeds: the last error stays. */
+  EXPECT(dyfos_client_snapshot(client, 0, 424242, &out), DYFOS_STATUS_UNKNOWN_MAP);
+  dyfos_string_free(NULL);
+  EXPECT_TRUE(dyfos_last_error(message, sizeof message) > 0 && strstr(message, "424242") != NULL);
   /* A made-up handle is refused, not dereferenced. */
-  EXPECT(dyfos_client_stats((dyfos_client *)0x1234560, &out), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_stats((dyfos_client *)0x1234560, 0, &out), DYFOS_STATUS_NULL_PARAMETER);
   /* An answer with codes the library never writes. */
   dyfos_answer forged = left_out;
   forged.stop = 42;
   EXPECT(dyfos_answer_to_json(&forged, &out), DYFOS_STATUS_INVALID_ARGUMENT);
 
   /* The last error: its full length, and truncation to the buffer. */
-  EXPECT(dyfos_client_rendezvous(client, NULL, &answer), DYFOS_STATUS_NULL_PARAMETER);
+  EXPECT(dyfos_client_rendezvous(client, 0, NULL, &answer), DYFOS_STATUS_NULL_PARAMETER);
   size_t full = dyfos_last_error(NULL, 0);
   char small[8];
   EXPECT_TRUE(full > sizeof small && dyfos_last_error(small, sizeof small) == full && strlen(small) < sizeof small);
   EXPECT_TRUE(strcmp(dyfos_status_name(DYFOS_STATUS_UNKNOWN_MAP), "unknown_map") == 0);
   EXPECT_TRUE(strcmp(dyfos_status_name(DYFOS_STATUS_NULL_PARAMETER), "null_parameter") == 0);
   EXPECT_TRUE(strcmp(dyfos_status_name(12345), "unknown_status") == 0);
-  EXPECT(dyfos_client_stats(client, &out), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_stats(client, 0, &out), DYFOS_STATUS_OK);
   EXPECT_TRUE(dyfos_last_error(NULL, 0) == 0); /* a success clears it */
   dyfos_string_free(out);
+
+  /* Versions: the ABI this header describes is the loaded library's. */
+  {
+    char numbers[64];
+    snprintf(numbers, sizeof numbers, "%u.%u.%u", DYFOS_VERSION_MAJOR, DYFOS_VERSION_MINOR, DYFOS_VERSION_PATCH);
+    EXPECT_TRUE(dyfos_abi_version() == DYFOS_ABI_VERSION);
+    EXPECT_TRUE(strcmp(dyfos_version(), numbers) == 0);
+  }
+
+  /* The scenario's content-id map changed by a delta: uploading the scenario again
+   * is map_exists, unless it replaces the map (one more version); deleted, it
+   * uploads anew at version 0. */
+  {
+    uint64_t at = 99, replaced = 99, id = 0;
+    EXPECT(dyfos_client_apply(client, 0, map, "[{\"SetSun\": {\"elevation\": 0.3, \"azimuth\": 1.0}}]", version,
+                              &at),
+           DYFOS_STATUS_OK);
+    EXPECT_TRUE(at == version + 1);
+    EXPECT(dyfos_client_upload_scenario(client, 0, scenario, 0, &id, NULL), DYFOS_STATUS_MAP_EXISTS);
+    EXPECT(dyfos_client_upload_scenario(client, 0, scenario, 1, &id, &replaced), DYFOS_STATUS_OK);
+    EXPECT_TRUE(id == map && replaced == at + 1);
+    EXPECT(dyfos_client_upload_scenario(client, 0, scenario, 2, &id, NULL), DYFOS_STATUS_INVALID_ARGUMENT);
+    EXPECT(dyfos_client_delete_map(client, 0, map, replaced), DYFOS_STATUS_OK);
+    EXPECT(dyfos_client_upload_scenario(client, 0, scenario, 0, &id, &replaced), DYFOS_STATUS_OK);
+    EXPECT_TRUE(id == map && replaced == 0);
+  }
 
   /* The daemon goes away: the handle says so, and nothing crashes. */
   printf("--- kill\n");
@@ -344,9 +434,12 @@ int main(int argc, char **argv) {
     failures++;
   }
   out = NULL;
-  dyfos_status gone = dyfos_client_stats(client, &out);
+  dyfos_status gone = dyfos_client_stats(client, 0, &out);
   EXPECT_TRUE(gone == DYFOS_STATUS_DAEMON_GONE || gone == DYFOS_STATUS_NO_DAEMON);
   EXPECT_TRUE(out == NULL);
+  /* The next call tries to reconnect once: no daemon, in this domain. */
+  EXPECT(dyfos_client_stats(client, 0, &out), DYFOS_STATUS_NO_DAEMON);
+  EXPECT_TRUE(dyfos_last_error(message, sizeof message) > 0 && strstr(message, domain) != NULL);
   EXPECT(dyfos_client_free(client), DYFOS_STATUS_OK);
 
   printf("--- done\n");
