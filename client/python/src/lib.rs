@@ -314,7 +314,7 @@ impl PyAnswer {
         Ok(dict)
     }
 
-    /// The map version searched.
+    /// The map version searched (after the request's deltas, one version each).
     #[getter]
     fn map_version(&self) -> u64 {
         self.0.map_version
@@ -487,7 +487,8 @@ impl PyClient {
         self.call(py, timeout, |c, t| c.create_map(map_id, bounds, sun, t))
     }
 
-    /// Applies a JSON array of map deltas atomically; returns the new version.
+    /// Applies a JSON array of map deltas atomically; returns the new version (the old
+    /// one plus the number of deltas: the version counts deltas, not batches).
     #[pyo3(signature = (map_id, deltas_json, expected_version=None, timeout=None))]
     fn apply(
         &self,

@@ -312,7 +312,8 @@ class Answer:
         viewer_position: the viewer's position ``[x, y, z]`` in ``map`` (m).
         viewer_yaw: the viewer's heading ψ_v (rad).
         evaluations: candidates evaluated: ``{"total", "workspace", "collision", "occlusion"}``.
-        map_version: the map version searched.
+        map_version: the map version searched: after the request's ``deltas``, one
+            version each (the version counts deltas, not batches).
         stop: why the search stopped: ``finished``, ``max_generations``, ``budget`` or
             ``deadline`` (the best pose found in time, not converged).
         micros: the search's compute time in the daemon, µs.
@@ -538,6 +539,10 @@ class Client:
     ) -> int:
         """Applies map deltas as one atomic batch (all or none) and returns the new version.
 
+        The version counts deltas, not batches: each delta adds 1, so a batch of 5
+        deltas moves version 3 to 8 (a voxel run with its cells is one delta; an empty
+        batch changes nothing).
+
         Args:
             deltas: as in ``dyfos map apply`` files, e.g. ``[{"RemoveObstacle": {"id": 3}},
                 {"SetSun": {"elevation": 0.5, "azimuth": 1.0}}]``; a list, JSON text or a path.
@@ -603,7 +608,7 @@ class Client:
                 :class:`DeadlineExceededError`. Keep it below ``timeout``.
             expected_version: the map must be at this version (before ``deltas``).
             deltas: map deltas applied atomically before the search (they change the
-                stored map), as for :meth:`apply`.
+                stored map, each adding 1 to its version), as for :meth:`apply`.
             timeout: this call's time limit in seconds (default: the client's).
 
         Raises:
