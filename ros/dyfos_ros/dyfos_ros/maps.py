@@ -13,7 +13,7 @@ the map. All of it runs on the map worker's thread (:class:`MapSync` methods are
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, List, Optional, Sequence
 
 import dyfos
@@ -38,12 +38,15 @@ def points_of_cloud(msg: Any) -> Any:
         f = fields[k]
         if f.datatype not in _FIELD_TYPES or f.count != 1:
             raise MapError(f"field {k} has datatype {f.datatype} and count {f.count}; need one number")
-        formats.append((">" if msg.is_bigendian else "<") + _FIELD_TYPES[f.datatype])
+        fmt = (">" if msg.is_bigendian else "<") + _FIELD_TYPES[f.datatype]
+        if f.offset + np.dtype(fmt).itemsize > msg.point_step:
+            raise MapError(f"field {k} at byte {f.offset} does not fit a point of {msg.point_step} bytes")
+        formats.append(fmt)
         offsets.append(f.offset)
     dtype = np.dtype({"names": ["x", "y", "z"], "formats": formats, "offsets": offsets, "itemsize": msg.point_step})
     width, height, row_step = int(msg.width), int(msg.height), int(msg.row_step)
     data = bytes(msg.data)
-    if msg.point_step < dtype.itemsize or width * msg.point_step > row_step or len(data) < row_step * height:
+    if width * msg.point_step > row_step or len(data) < row_step * height:
         raise MapError(
             f"the cloud's sizes disagree: {width} × {height} points of {msg.point_step} bytes, "
             f"rows of {row_step} bytes, {len(data)} bytes of data"
@@ -77,7 +80,6 @@ class MapState:
     last_update: float = 0.0
     error: str = ""
     pending: bool = False
-    history: List[str] = field(default_factory=list)
 
 
 class MapSync:
@@ -133,9 +135,9 @@ class MapSync:
         try:
             self._source = build
             self.state.source = kind
+            voxels = build(s)
             if s.bounds is None or s.sun is None:
                 raise MapError("set the parameters `bounds` and `sun`: the map needs them (an OctoMap has neither)")
-            voxels = build(s)
             self._send(client, s, voxels)
             self.state.error = ""
         except (MapError, dyfos.DyfosError) as e:

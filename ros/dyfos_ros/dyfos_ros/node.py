@@ -473,6 +473,7 @@ class DyfosNode(Node):
                 ("source", m.source),
                 ("updates", m.updates),
                 ("uploads", m.uploads),
+                ("pending", m.pending),
                 ("age_s", round(time.time() - m.last_update, 3) if m.last_update else None),
                 ("topics", ", ".join(topics)),
             )

@@ -175,14 +175,29 @@ def test_a_cloud_of_cell_centres_is_the_same_map_and_updates_as_deltas(
 def test_a_map_is_refused_without_bounds_or_in_another_frame_and_follows_parameter_changes(
     ros: Ros, daemon: Any, start_node: Any
 ) -> None:
-    start_node(ros, daemon, map_id=0xC3, diagnostics_period=0.2)
+    start_node(ros, daemon, map_id=0xC3, diagnostics_period=0.2, cloud_topic="/cloud")
     diagnostics = ros.subscribe(DiagnosticArray, "/diagnostics")
-    maps = ros.publisher(Octomap, "/octomap_binary", LATCHED)
-    bt = GEB079.read_bytes()
-    maps.publish(octomap_msg(bt, frame_id="odom"))
 
     def map_status() -> DiagnosticStatus:
         return status_of(diagnostics[-1], "map")
+
+    clouds = ros.publisher(PointCloud2, "/cloud", LATCHED)
+    for bad, needle in (
+        (PointCloud2(height=1, width=1, point_step=16, row_step=16, data=bytes(16)), "no x, y, z fields"),
+        (cloud_msg([[0, 0, 0]], 0.1), "`bounds` and `sun`"),
+    ):
+        bad.header.frame_id = "map"
+        if not bad.fields:
+            bad.fields = [PointField(name="x", offset=0, datatype=PointField.FLOAT32, count=1)]
+        clouds.publish(bad)
+        eventually(lambda: diagnostics and needle in map_status().message, f"a cloud refused: {needle}", spin=ros)
+    short = cloud_msg([[0, 0, 0], [1, 0, 0]], 0.1)
+    short.data = short.data[:20]
+    clouds.publish(short)
+    eventually(lambda: "sizes disagree" in map_status().message, "a short cloud refused", spin=ros)
+    maps = ros.publisher(Octomap, "/octomap_binary", LATCHED)
+    bt = GEB079.read_bytes()
+    maps.publish(octomap_msg(bt, frame_id="odom"))
 
     eventually(lambda: diagnostics and "`odom`" in map_status().message, "the frame to be refused", spin=ros)
     assert map_status().level == DiagnosticStatus.ERROR

@@ -3,11 +3,14 @@ its own process with its own ``dyfosd``; this process calls it over ROS 2."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
 import dyfos
-from conftest import DATA, Ros
+from conftest import DATA, PATIENCE, ROOT, Ros
 from dyfos_msgs.srv import FindSensorPose
 from helpers import REFERENCE, SERVICE, assert_answer_is, infeasible_map, parameters, request, solve
 
@@ -93,3 +96,25 @@ def test_every_error_status(ros: Ros, daemon: Any, start_node: Any) -> None:
     assert (r.status, r.map_version) == ("no_feasible_pose", 1)
     assert refused(request(0xF00, s, algorithm="brute", deadline=0.001)).status == "deadline_exceeded"
     assert ros.call(FindSensorPose, SERVICE, request(good, s)).success, "still serving"
+
+
+def test_the_readme_client_runs(ros: Ros, daemon: Any, start_node: Any, tmp_path: Path) -> None:
+    """The README's 10-line client, as printed there, gets an answer from the node."""
+    readme = (ROOT / "README.md").read_text()
+    section = readme[readme.index("### A client") :]
+    code = section[section.index("```python\n") + len("```python\n") :]
+    code = code[: code.index("```")]
+    with daemon.client() as client:
+        client.upload_scenario(DATA / "example.json", map_id=7)
+    start_node(ros, daemon)
+    script = tmp_path / "client.py"
+    script.write_text(code)
+    out = subprocess.run(
+        [sys.executable, str(script)],
+        capture_output=True,
+        text=True,
+        timeout=PATIENCE,
+        env={**os.environ, "ROS_DOMAIN_ID": str(ros.domain)},
+    )
+    assert out.returncode == 0, out.stderr
+    assert "geometry_msgs.msg.Pose(position=geometry_msgs.msg.Point(x=" in out.stdout, out.stdout
