@@ -102,8 +102,14 @@ def test_changes_that_do_not_fit_a_batch_or_another_grid_are_refused(client: dyf
     [
         (lambda: dyfos.Voxels.from_octomap(b"not a tree"), "not an OctoMap .bt file"),
         (lambda: dyfos.Voxels.from_octomap_message({**tree_of(GEB079.read_bytes()), "binary": False}), "octomap_full"),
-        (lambda: dyfos.Voxels.from_octomap_message({**tree_of(GEB079.read_bytes()), "id": "ColorOcTree"}), "ColorOcTree"),
-        (lambda: dyfos.Voxels.from_octomap_message({**tree_of(GEB079.read_bytes()), "id": "OcTree\nres 5"}), "not supported"),
+        (
+            lambda: dyfos.Voxels.from_octomap_message({**tree_of(GEB079.read_bytes()), "id": "ColorOcTree"}),
+            "ColorOcTree",
+        ),
+        (
+            lambda: dyfos.Voxels.from_octomap_message({**tree_of(GEB079.read_bytes()), "id": "OcTree\nres 5"}),
+            "not supported",
+        ),
         (lambda: dyfos.Voxels.from_octomap_message({**tree_of(GEB079.read_bytes()[:-3])}), "truncated"),
         (lambda: dyfos.Voxels.from_octomap_message({**tree_of(GEB079.read_bytes() + b"\0\0")}), "corrupt"),
         (lambda: dyfos.Voxels.from_points([[0.0, float("nan"), 0.0]], 0.1), "finite"),
@@ -119,16 +125,34 @@ def test_maps_that_cannot_be_read_are_refused_naming_why(make: Any, needle: str)
 
 
 def test_an_empty_message_is_an_empty_map() -> None:
-    assert len(dyfos.Voxels.from_octomap_message({"binary": True, "id": "OcTree", "resolution": 0.05, "data": b""})) == 0
+    assert (
+        len(dyfos.Voxels.from_octomap_message({"binary": True, "id": "OcTree", "resolution": 0.05, "data": b""})) == 0
+    )
 
 
 def test_default_params_are_the_spec_defaults(client: dyfos.Client, tmp_path: Path) -> None:
     """``default_params()`` names every SPEC §11 parameter, and a request with them
     explicitly is the same as one without."""
     d = dyfos.default_params()
-    assert list(d) == ["rover_radius", "perimeter_points", "marker_size", "marker_height", "viewer_radius",
-                       "safety_margin", "z_min", "z_max", "camera_pitch", "t_vs", "f_h", "f_v", "rho_min",
-                       "rho_max", "kappa", "lambda", "model"]
+    assert list(d) == [
+        "rover_radius",
+        "perimeter_points",
+        "marker_size",
+        "marker_height",
+        "viewer_radius",
+        "safety_margin",
+        "z_min",
+        "z_max",
+        "camera_pitch",
+        "t_vs",
+        "f_h",
+        "f_v",
+        "rho_min",
+        "rho_max",
+        "kappa",
+        "lambda",
+        "model",
+    ]
     assert (d["rho_max"], d["perimeter_points"], d["model"], d["t_vs"]) == (6.0, 8, "paper", [0.1, 0.0, -0.05])
     s = dyfos.read_scenario(DATA / "example.json")
     map_id = client.upload_scenario(DATA / "example.json")
