@@ -13,15 +13,18 @@ Interfaces (names relative to the node, default name ``dyfos``):
   ``cloud_topic`` (``sensor_msgs/PointCloud2`` of occupied-cell centres, off by default).
 
 Every call to the daemon goes through the ``dyfos`` binding, on worker threads
-(:mod:`dyfos_ros.worker`); the executor's thread only handles ROS. The README's "ROS 2"
+(:mod:`dyfos_ros.worker`); the executor's threads handle ROS, and a service call's
+thread sleeps until its worker has the answer. The README's "ROS 2"
 section documents the parameters.
 """
 
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future
 import os
 import sys
+import threading
 import time
 from typing import Any, Callable, Dict, List, NamedTuple, Optional
 
@@ -33,7 +36,8 @@ from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from octomap_msgs.msg import Octomap
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -43,7 +47,7 @@ from visualization_msgs.msg import MarkerArray
 
 from . import convert, markers
 from .maps import MapError, MapSync, settings_from
-from .worker import SUPERSEDED, Worker
+from .worker import SUPERSEDED, Stopped, Worker
 
 NODE_NAME = "dyfos"
 
@@ -188,6 +192,8 @@ MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability
 MARKER_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 CONNECT_TIMEOUT = 0.25
+#: Executor threads: each service call waiting for the daemon holds one.
+EXECUTOR_THREADS = 8
 
 
 class DyfosNode(Node):
@@ -202,6 +208,7 @@ class DyfosNode(Node):
                 p.default,
                 ParameterDescriptor(description=p.description, read_only=p.read_only, dynamic_typing=True),
             )
+        self._spec = self._read_spec_params()
         self.add_post_set_parameters_callback(self._parameters_set)
         self._prefix = self._param("prefix")
         self._domain = self._param("domain") or None
@@ -212,6 +219,7 @@ class DyfosNode(Node):
         # One client each: a map upload holds up neither a query nor the diagnostics.
         self._workers = {name: Worker(f"dyfos-{name}", connect) for name in ("query", "stream", "map", "stats")}
         self._maps = MapSync(self._map_settings, lambda line: self.get_logger().info(line))
+        self._counts_lock = threading.Lock()
         self._served = 0
         self._failed: Dict[str, int] = {}
         self._daemon_pid: Optional[int] = 0  # not yet asked: the first answer is logged
@@ -221,13 +229,21 @@ class DyfosNode(Node):
         self._viewer_goal = self.create_publisher(PoseStamped, "~/viewer_goal", 10)
         self._markers = self.create_publisher(MarkerArray, "~/markers", MARKER_QOS)
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_service(FindSensorPose, "~/find_sensor_pose", self._find_sensor_pose)
-        self.create_subscription(PoseWithCovarianceStamped, "~/belief", self._belief, 10)
+        # Reentrant: a service call waiting for the daemon holds one executor thread and
+        # nothing else; the other callbacks only hand work to a worker.
+        group = ReentrantCallbackGroup()
+        self.create_subscription(PoseWithCovarianceStamped, "~/belief", self._belief, 10, callback_group=group)
         if self._param("octomap_topic"):
-            self.create_subscription(Octomap, self._param("octomap_topic"), self._octomap, MAP_QOS)
+            self.create_subscription(
+                Octomap, self._param("octomap_topic"), self._octomap, MAP_QOS, callback_group=group
+            )
         if self._param("cloud_topic"):
-            self.create_subscription(PointCloud2, self._param("cloud_topic"), self._cloud, MAP_QOS)
-        self.create_timer(float(self._param("diagnostics_period")), self._diagnose)
+            self.create_subscription(
+                PointCloud2, self._param("cloud_topic"), self._cloud, MAP_QOS, callback_group=group
+            )
+        self.create_timer(float(self._param("diagnostics_period")), self._diagnose, callback_group=group)
+        # Last: the service on the graph means the node is ready.
+        self.create_service(FindSensorPose, "~/find_sensor_pose", self._find_sensor_pose, callback_group=group)
         self.get_logger().info(
             f"serving ~/find_sensor_pose from dyfosd prefix={self._prefix!r} domain={self._domain!r}, "
             f"map_id={self._param('map_id')}, frame {self._param('frame_id')!r}"
@@ -249,11 +265,18 @@ class DyfosNode(Node):
         return SetParametersResult(successful=True)
 
     def _parameters_set(self, parameters: List[Parameter]) -> None:
+        if any(p.name in convert.SPEC_DEFAULTS for p in parameters):
+            self._spec = self._read_spec_params()
         if any(p.name in MAP_PARAMETERS for p in parameters) and self.executor is not None:
-            self._workers["map"].submit(self._logged(self._maps.resync(), "map"), self.executor, key="map")
+            self._workers["map"].submit(self._logged(self._maps.resync(), "map"), key="map")
+
+    def _read_spec_params(self) -> Dict[str, Any]:
+        return {name: convert.spec_value(name, self._param(name)) for name in convert.SPEC_DEFAULTS}
 
     def _spec_params(self) -> Dict[str, Any]:
-        return {name: convert.spec_value(name, self._param(name)) for name in convert.SPEC_DEFAULTS}
+        """The node's SPEC §11 parameters (kept up to date by ``_parameters_set``; not to
+        be changed by the caller)."""
+        return self._spec
 
     def _map_settings(self):
         return settings_from(
@@ -300,15 +323,17 @@ class DyfosNode(Node):
                 timeout=timeout,
             )
 
-        return self._workers[worker].submit(job, self.executor, key=key), mean
+        return self._workers[worker].submit(job, key=key), mean
 
     def _count(self, status: str) -> None:
-        if status:
-            self._failed[status] = self._failed.get(status, 0) + 1
-        else:
-            self._served += 1
+        with self._counts_lock:
+            if status:
+                self._failed[status] = self._failed.get(status, 0) + 1
+            else:
+                self._served += 1
 
-    async def _find_sensor_pose(self, request: Any, response: Any) -> Any:
+    def _find_sensor_pose(self, request: Any, response: Any) -> Any:
+        # Runs on an executor thread, which sleeps until the worker has the answer.
         frame_id = self._param("frame_id")
         try:
             params = convert.params_from_parameters(request.params, self._spec_params())
@@ -322,9 +347,9 @@ class DyfosNode(Node):
                 params,
                 request.budget or None,
             )
-            answer = await future
-            if future.cancelled() or answer is None:
-                raise convert.RequestError("shutting_down", "the node is shutting down")
+            answer = future.result()
+        except Stopped as e:
+            return convert.fill_error(response, "shutting_down", str(e))
         except Exception as e:
             status, message, version = convert.error_of(e)
             self._count(status)
@@ -333,7 +358,7 @@ class DyfosNode(Node):
         self._markers.publish(markers.markers(answer, mean, params, frame_id, request.belief.header.stamp))
         return convert.fill_response(response, answer, request.belief, frame_id)
 
-    async def _belief(self, msg: PoseWithCovarianceStamped) -> None:
+    def _belief(self, msg: PoseWithCovarianceStamped) -> None:
         frame_id = self._param("frame_id")
         try:
             params = self._spec_params()
@@ -348,19 +373,33 @@ class DyfosNode(Node):
                 None,
                 key="belief",
             )
-            answer = await future
-            if answer is SUPERSEDED or future.cancelled() or answer is None:
-                return
         except Exception as e:
-            status, message, _version = convert.error_of(e)
-            self._count(status)
-            self.get_logger().warning(f"~/belief: {status}: {message}", throttle_duration_sec=5.0)
+            self._belief_failed(e)
             return
-        self._count("")
-        stamp = msg.header.stamp
-        self._sensor_goal.publish(convert.sensor_pose(answer, frame_id, stamp))
-        self._viewer_goal.publish(convert.viewer_pose(answer, frame_id, stamp))
-        self._markers.publish(markers.markers(answer, mean, params, frame_id, stamp))
+
+        def publish(done: Future) -> None:
+            # On the worker's thread, when the answer comes.
+            try:
+                answer = done.result()
+            except Stopped:
+                return
+            except Exception as e:
+                self._belief_failed(e)
+                return
+            if answer is SUPERSEDED:
+                return
+            self._count("")
+            stamp = msg.header.stamp
+            self._sensor_goal.publish(convert.sensor_pose(answer, frame_id, stamp))
+            self._viewer_goal.publish(convert.viewer_pose(answer, frame_id, stamp))
+            self._markers.publish(markers.markers(answer, mean, params, frame_id, stamp))
+
+        future.add_done_callback(publish)
+
+    def _belief_failed(self, e: BaseException) -> None:
+        status, message, _version = convert.error_of(e)
+        self._count(status)
+        self.get_logger().warning(f"~/belief: {status}: {message}", throttle_duration_sec=5.0)
 
     # Maps -----------------------------------------------------------------------
 
@@ -388,11 +427,11 @@ class DyfosNode(Node):
 
     def _octomap(self, msg: Octomap) -> None:
         if self._map_frame_ok(msg, self._param("octomap_topic")):
-            self._workers["map"].submit(self._logged(self._maps.octomap(msg), "octomap"), self.executor, key="map")
+            self._workers["map"].submit(self._logged(self._maps.octomap(msg), "octomap"), key="map")
 
     def _cloud(self, msg: PointCloud2) -> None:
         if self._map_frame_ok(msg, self._param("cloud_topic")):
-            self._workers["map"].submit(self._logged(self._maps.cloud(msg), "cloud"), self.executor, key="map")
+            self._workers["map"].submit(self._logged(self._maps.cloud(msg), "cloud"), key="map")
 
     def _verify_map(self) -> Callable[[dyfos.Client], None]:
         """After the daemon (re)started: is the map still there, at the version we made?"""
@@ -416,13 +455,18 @@ class DyfosNode(Node):
 
     # Diagnostics ----------------------------------------------------------------
 
-    async def _diagnose(self) -> None:
-        future = self._workers["stats"].submit(lambda c: c.stats(), self.executor, key="stats")
+    def _diagnose(self) -> None:
+        self._workers["stats"].submit(lambda c: c.stats(), key="stats").add_done_callback(self._diagnosed)
+
+    def _diagnosed(self, done: Future) -> None:
+        # On the stats worker's thread.
         try:
-            stats = await future
-            if stats is SUPERSEDED or future.cancelled() or stats is None:
+            stats = done.result()
+            if stats is SUPERSEDED:
                 return
             error = ""
+        except Stopped:
+            return
         except Exception as e:
             status, detail, _version = convert.error_of(e)
             stats, error = None, f"{status}: {detail}"
@@ -432,7 +476,7 @@ class DyfosNode(Node):
                 self.get_logger().warning(f"dyfosd (prefix {self._prefix!r}) is gone: {error}")
             else:
                 self.get_logger().info(f"connected to dyfosd pid {pid} (prefix {self._prefix!r})")
-                self._workers["map"].submit(self._logged(self._verify_map(), "map"), self.executor, key="map")
+                self._workers["map"].submit(self._logged(self._verify_map(), "map"), key="map")
             self._daemon_pid = pid
         self._diagnostics.publish(self._diagnostic_array(stats, error))
 
@@ -479,9 +523,11 @@ class DyfosNode(Node):
             )
         ]
         queries = DiagnosticStatus(name=f"{name}: queries", hardware_id=hardware, level=DiagnosticStatus.OK)
-        queries.message = f"{self._served} answered, {sum(self._failed.values())} refused"
-        queries.values = [KeyValue(key="answered", value=str(self._served))] + [
-            KeyValue(key=f"refused.{k}", value=str(v)) for k, v in sorted(self._failed.items())
+        with self._counts_lock:
+            served, failed = self._served, dict(self._failed)
+        queries.message = f"{served} answered, {sum(failed.values())} refused"
+        queries.values = [KeyValue(key="answered", value=str(served))] + [
+            KeyValue(key=f"refused.{k}", value=str(v)) for k, v in sorted(failed.items())
         ]
         array = DiagnosticArray(status=[daemon, map_status, queries])
         array.header.stamp = self.get_clock().now().to_msg()
@@ -526,7 +572,7 @@ def main(args: Optional[List[str]] = None) -> None:
         sys.exit(2)
     rclpy.init(args=argv)
     node: Optional[DyfosNode] = None
-    executor = SingleThreadedExecutor()
+    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
     clean, status = True, 0
     try:
         node = DyfosNode()
@@ -537,12 +583,17 @@ def main(args: Optional[List[str]] = None) -> None:
     except (InvalidParameterValueException, InvalidParameterTypeException) as e:
         print(f"dyfos-ros: {e}", file=sys.stderr)
         clean, status = True, 2
+    except Exception:
+        if rclpy.ok():
+            raise
+        # Ctrl-C or SIGTERM while the node was being made: a stop, not an error.
     finally:
         if node is not None:
+            # First the workers: a service call waiting for the daemon returns at once.
             clean = node.stop_workers()
-            executor.remove_node(node)
+        executor.shutdown(timeout_sec=10.0)
+        if node is not None:
             node.destroy_node()
-        executor.shutdown()
         rclpy.try_shutdown()
     if not clean:
         # A worker is inside a call to the daemon: ROS is shut down cleanly already;

@@ -1,13 +1,18 @@
-"""A thread with its own ``dyfos.Client``: the node's calls to the daemon run here, never
-on the executor's thread, so a long search or map upload holds up neither other
-callbacks nor Ctrl-C.
+"""A thread with its own ``dyfos.Client``: the node's calls to the daemon run here, so a
+long search or map upload holds up neither other callbacks nor Ctrl-C.
 
-A job is a function of the client; :meth:`Worker.submit` returns an rclpy
-:class:`~rclpy.task.Future` that a coroutine callback awaits on the executor's thread.
-Jobs run one at a time, in order. A job submitted with a ``key`` replaces a job of
-the same key that has not started (its future gets :data:`SUPERSEDED`): a stream of
-beliefs or maps is served at the pace the daemon answers, newest first, without a
-backlog.
+A job is a function of the client; :meth:`Worker.submit` returns a
+:class:`concurrent.futures.Future` of its result. The service callback waits on it (its
+executor thread sleeps, no CPU); topic and timer callbacks add a done callback that
+publishes from the worker's thread and return at once. (Not an rclpy coroutine: jazzy's
+executor re-runs a waiting coroutine on every turn, which spins a core for as long as the
+daemon searches.)
+
+Jobs run one at a time, in order. A job submitted with a ``key`` replaces a job of the
+same key that has not started (its future gets :data:`SUPERSEDED`): a stream of beliefs
+or maps is served at the pace the daemon answers, newest first, without a backlog.
+:meth:`Worker.stop` cancels the queued jobs and fails the running one's future with
+:class:`Stopped`, so nobody waits for the daemon once the node is told to stop.
 
 The client connects on first use and is kept: after a daemon restart its next call
 reconnects by itself (a call in between fails with ``dyfos.DaemonGoneError``).
@@ -16,16 +21,30 @@ reconnects by itself (a call in between fails with ``dyfos.DaemonGoneError``).
 from __future__ import annotations
 
 import threading
+from concurrent.futures import Future, InvalidStateError
 from typing import Any, Callable, List, Optional, Tuple
 
 import dyfos
-from rclpy.executors import Executor
-from rclpy.task import Future
 
 #: What the future of a job replaced by a newer one of the same key gets.
 SUPERSEDED = object()
 
 Job = Callable[[dyfos.Client], Any]
+
+
+class Stopped(Exception):
+    """The node stopped before the job's answer came."""
+
+
+def _settle(future: Future, result: Any = None, error: Optional[BaseException] = None) -> None:
+    """Sets a future that :meth:`Worker.stop` may have failed already."""
+    try:
+        if error is None:
+            future.set_result(result)
+        else:
+            future.set_exception(error)
+    except InvalidStateError:
+        pass
 
 
 class Worker:
@@ -41,41 +60,41 @@ class Worker:
         self._client: Optional[dyfos.Client] = None
         self._lock = threading.Condition()
         self._queue: List[Tuple[Optional[str], Future, Job]] = []
+        self._running: Optional[Future] = None
         self._stopping = False
-        self._busy = False
         # A daemon thread: a call stuck in the daemon cannot keep the process alive.
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
-    def submit(self, job: Job, executor: Optional[Executor], key: Optional[str] = None) -> Future:
-        """Queues ``job``; its future (done on this worker's thread) wakes ``executor``."""
-        future = Future(executor=executor)
-        # A done callback makes set_result schedule a task on the executor, which wakes
-        # it, so a coroutine awaiting the future resumes at once.
-        future.add_done_callback(lambda _f: None)
+    def submit(self, job: Job, key: Optional[str] = None) -> Future:
+        """Queues ``job``; returns the future of its result."""
+        future: Future = Future()
         with self._lock:
             if self._stopping:
-                future.cancel()
+                _settle(future, error=Stopped("the node is shutting down"))
                 return future
             if key is not None:
                 for i, (k, old, _job) in enumerate(self._queue):
                     if k == key:
                         self._queue[i] = (key, future, job)
-                        old.set_result(SUPERSEDED)
+                        _settle(old, SUPERSEDED)
                         return future
             self._queue.append((key, future, job))
             self._lock.notify()
         return future
 
     def stop(self) -> None:
-        """Takes no more jobs and cancels the queued ones; the thread closes its client
-        after the job it runs (if any)."""
+        """Takes no more jobs, fails the queued ones and the running one with
+        :class:`Stopped`; the thread closes its client after the call it is in (if any)."""
         with self._lock:
             self._stopping = True
             queued, self._queue = self._queue, []
+            running = self._running
             self._lock.notify()
         for _key, future, _job in queued:
-            future.cancel()
+            _settle(future, error=Stopped("the node is shutting down"))
+        if running is not None:
+            _settle(running, error=Stopped("the node is shutting down"))
 
     def join(self, timeout: float) -> bool:
         """Waits up to ``timeout`` s for the thread to end; whether it did."""
@@ -90,19 +109,17 @@ class Worker:
                 if self._stopping:
                     break
                 _key, future, job = self._queue.pop(0)
-                self._busy = True
+                self._running = future
             try:
                 if self._client is None:
                     self._client = self._connect()
                 result = job(self._client)
-            except BaseException as e:  # delivered to the awaiting callback
-                if not future.done():
-                    future.set_exception(e)
+            except BaseException as e:  # delivered to whoever waits for the job
+                _settle(future, error=e)
             else:
-                if not future.done():
-                    future.set_result(result)
+                _settle(future, result)
             finally:
                 with self._lock:
-                    self._busy = False
+                    self._running = None
         if self._client is not None:
             self._client.close()

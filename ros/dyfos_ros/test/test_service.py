@@ -12,6 +12,7 @@ from typing import Any
 import dyfos
 from conftest import DATA, PATIENCE, ROOT, Ros
 from dyfos_msgs.srv import FindSensorPose
+from rcl_interfaces.srv import SetParameters
 from helpers import REFERENCE, SERVICE, assert_answer_is, infeasible_map, parameters, request, solve
 
 
@@ -48,6 +49,14 @@ def test_node_parameters_apply_and_a_request_overrides_them(
     req = request(map_id, {**s, "params": own}, seed=2)
     got = ros.call(FindSensorPose, SERVICE, req)
     assert_answer_is(got, solve(tmp_path, {**s, "params": {**node_params, **own}}, "dyfos", 2), req.belief)
+    # A parameter set at run time applies to the next request.
+    setter = ros.client(SetParameters, "/dyfos/set_parameters")
+    future = setter.call_async(SetParameters.Request(parameters=parameters({"lambda": 0.5})))
+    ros.spin_until(future.done, what="set_parameters")
+    assert future.result().results[0].successful
+    req = request(map_id, {**s, "params": {}}, seed=2)
+    got = ros.call(FindSensorPose, SERVICE, req)
+    assert_answer_is(got, solve(tmp_path, {**s, "params": {**node_params, "lambda": 0.5}}, "dyfos", 2), req.belief)
     for params, needle in (
         ({"lambda_": 1.0}, "unknown parameter `lambda_`"),
         ({"perimeter_points": 4.0}, "integer"),
