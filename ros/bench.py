@@ -8,7 +8,9 @@ through the ``dyfos`` binding's direct call, in alternating blocks against one
 Starts its own dyfosd (own prefix, iceoryx2 domain and state directory) and node (own
 ROS domain id, discovery on this machine only), uploads ``tests/data/example.json``, and
 prints per algorithm the median and p99 of each path and the difference of the
-medians; ``--json FILE`` keeps the raw samples. Run it in the venv of ``ros/install.sh``
+medians. A third path is ROS's own floor: the same request to a server in another
+process that answers at once without asking any daemon. ``--json FILE`` keeps the raw
+samples. Run it in the venv of ``ros/install.sh``
 (with a release binding: ``DYFOS_BINDING=target/release/lib_dyfos.so``).
 """
 
@@ -26,7 +28,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Dict, List
+from typing import Any, Dict, List
 
 import dyfos
 from dyfos import ros as dros
@@ -48,7 +50,11 @@ def main() -> None:
     ap.add_argument("--count", type=int, default=50, help="queries per block")
     ap.add_argument("--domain-id", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "87")))
     ap.add_argument("--json", help="write every sample (seconds) here")
+    ap.add_argument("--serve-echo", action="store_true", help=argparse.SUPPRESS)  # the floor's server
     args = ap.parse_args()
+    if args.serve_echo:
+        serve_echo()
+        return
 
     os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -62,7 +68,7 @@ def main() -> None:
     daemon = subprocess.Popen(
         [args.dyfosd, "--prefix", prefix, "--domain", domain, "--state-dir", state], stderr=subprocess.DEVNULL
     )
-    node = None
+    node = echo = None
     try:
         client = dyfos.Client(prefix=prefix, domain=domain, timeout=30.0, connect_timeout=30.0)
         scenario = dyfos.read_scenario(ROOT / "tests" / "data" / "example.json")
@@ -70,11 +76,13 @@ def main() -> None:
         node = subprocess.Popen(
             [args.node, "--ros-args", "-p", f'prefix:="{prefix}"', "-p", f'domain:="{domain}"', "--log-level", "warn"]
         )
+        echo = subprocess.Popen([sys.executable, __file__, "--serve-echo"])
         rclpy.init()
         ros = rclpy.create_node(f"rosbench_{pid}")
         service = ros.create_client(FindSensorPose, "/dyfos/find_sensor_pose")
+        floor = ros.create_client(FindSensorPose, "/rosbench_echo/find_sensor_pose")
         end = time.monotonic() + 30.0
-        while not service.service_is_ready():
+        while not (service.service_is_ready() and floor.service_is_ready()):
             if time.monotonic() > end:
                 raise SystemExit("the node's service did not appear within 30 s")
             rclpy.spin_once(ros, timeout_sec=0.05)
@@ -83,7 +91,7 @@ def main() -> None:
         yaw = dros.yaw_from_quaternion(belief["pose"]["orientation"])
         mean, cov = [scenario["rover"]["mean"][0], scenario["rover"]["mean"][1], yaw], scenario["rover"]["cov"]
 
-        def ros_call(algorithm: str) -> float:
+        def ros_call(algorithm: str, to: Any = service) -> float:
             req = FindSensorPose.Request(map_id=map_id, algorithm=algorithm, seed=1)
             req.belief.header.frame_id = "map"
             p, o = belief["pose"]["position"], belief["pose"]["orientation"]
@@ -92,7 +100,7 @@ def main() -> None:
             q.x, q.y, q.z, q.w = o["x"], o["y"], o["z"], o["w"]
             req.belief.pose.covariance = belief["covariance"]
             start = time.perf_counter()
-            future = service.call_async(req)
+            future = to.call_async(req)
             while not future.done():  # jazzy: not spin_until_future_complete (ROS2.md, Q2)
                 rclpy.spin_once(ros, timeout_sec=1.0)
             took = time.perf_counter() - start
@@ -104,38 +112,67 @@ def main() -> None:
             client.rendezvous(map_id, mean, cov, algorithm=algorithm, seed=1)
             return time.perf_counter() - start
 
+        load = f"{os.getloadavg()[0]:.1f}"
         samples: Dict[str, Dict[str, List[float]]] = {}
         for algorithm in args.algorithms.split(","):
-            got = samples[algorithm] = {"ros": [], "direct": []}
-            for _ in range(args.count):  # warm up both paths
+            got = samples[algorithm] = {"direct": [], "ros": [], "ros floor": []}
+            for _ in range(args.count):  # warm up every path
                 ros_call(algorithm)
+                ros_call(algorithm, floor)
                 direct_call(algorithm)
             for _ in range(args.rounds):
                 got["direct"] += [direct_call(algorithm) for _ in range(args.count)]
                 got["ros"] += [ros_call(algorithm) for _ in range(args.count)]
+                got["ros floor"] += [ros_call(algorithm, floor) for _ in range(args.count)]
 
+        print(f"load average before: {load}, after: {os.getloadavg()[0]:.1f}")
         print(f"machine: {platform.node()}, {os.cpu_count()} cores, {cpu_model()}; {time.strftime('%Y-%m-%d')}")
         print(f"{args.rounds} alternating blocks of {args.count} queries per path and algorithm\n")
         print("| algorithm | path | median (ms) | p99 (ms) |")
         print("|---|---|---|---|")
         for algorithm, got in samples.items():
-            for path in ("direct", "ros"):
+            for path in ("direct", "ros", "ros floor"):
                 s = got[path]
                 print(f"| {algorithm} | {path} | {statistics.median(s) * 1e3:.3f} | {percentile(s, 0.99) * 1e3:.3f} |")
-            added = statistics.median(got["ros"]) - statistics.median(got["direct"])
-            print(f"| {algorithm} | ROS added (median) | {added * 1e3:.3f} | |")
+            med = {path: statistics.median(got[path]) for path in got}
+            print(f"| {algorithm} | ros − direct (medians) | {(med['ros'] - med['direct']) * 1e3:.3f} | |")
+            print(
+                f"| {algorithm} | ros − direct − ros floor | {(med['ros'] - med['direct'] - med['ros floor']) * 1e3:.3f} | |"
+            )
         if args.json:
             Path(args.json).write_text(json.dumps(samples))
         ros.destroy_node()
         rclpy.try_shutdown()
         client.close()
     finally:
-        if node is not None:
-            node.send_signal(signal.SIGINT)
-            node.wait(timeout=30)
+        for p in (node, echo):
+            if p is not None:
+                p.send_signal(signal.SIGINT)
+                p.wait(timeout=30)
         daemon.terminate()
         daemon.wait(timeout=30)
         shutil.rmtree(state, ignore_errors=True)
+
+
+def serve_echo() -> None:
+    """A FindSensorPose server that answers at once (success, all else zero)."""
+    import rclpy
+    from dyfos_msgs.srv import FindSensorPose
+    from rclpy.executors import ExternalShutdownException
+
+    def answer(request: Any, response: Any) -> Any:
+        response.success = True
+        return response
+
+    rclpy.init()
+    node = rclpy.create_node("rosbench_echo")
+    node.create_service(FindSensorPose, "~/find_sensor_pose", answer)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    node.destroy_node()
+    rclpy.try_shutdown()
 
 
 def cpu_model() -> str:

@@ -15,9 +15,8 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Tuple
 
 import dyfos
 from dyfos import ros as dros
-from geometry_msgs.msg import Point, Pose, PoseStamped, PoseWithCovariance, Quaternion
+from geometry_msgs.msg import PoseStamped
 from rclpy.parameter import parameter_value_to_python
-from std_msgs.msg import Header
 
 #: SPEC §11 parameters at SPEC's defaults, by name (from the binding: one source).
 SPEC_DEFAULTS: Dict[str, Any] = dyfos.default_params()
@@ -99,29 +98,29 @@ def belief_from_msg(msg: Any, frame_id: str) -> Tuple[List[float], List[List[flo
     return dros.belief_from_pose_with_covariance(msg)
 
 
-def _header(frame_id: str, stamp: Any) -> Header:
-    return Header(frame_id=frame_id, stamp=stamp)
+def _stamped(
+    msg: PoseStamped, frame_id: str, stamp: Any, position: List[float], quaternion: List[float]
+) -> PoseStamped:
+    # In place: building message objects costs more than setting their fields.
+    msg.header.frame_id = frame_id
+    msg.header.stamp = stamp
+    p, o = msg.pose.position, msg.pose.orientation
+    p.x, p.y, p.z = position
+    o.x, o.y, o.z, o.w = quaternion
+    return msg
 
 
-def _pose(position: List[float], quaternion: List[float]) -> Pose:
-    return Pose(
-        position=Point(x=position[0], y=position[1], z=position[2]),
-        orientation=Quaternion(x=quaternion[0], y=quaternion[1], z=quaternion[2], w=quaternion[3]),
-    )
-
-
-def sensor_pose(answer: dyfos.Answer, frame_id: str, stamp: Any) -> PoseStamped:
+def sensor_pose(answer: dyfos.Answer, frame_id: str, stamp: Any, into: Optional[PoseStamped] = None) -> PoseStamped:
     """Where to put the camera: ``sensor_position`` and ``sensor_quaternion`` (x along
-    the optical axis, y left, z up)."""
-    return PoseStamped(header=_header(frame_id, stamp), pose=_pose(answer.sensor_position, answer.sensor_quaternion))
+    the optical axis, y left, z up); written into ``into`` if given."""
+    msg = PoseStamped() if into is None else into
+    return _stamped(msg, frame_id, stamp, answer.sensor_position, answer.sensor_quaternion)
 
 
-def viewer_pose(answer: dyfos.Answer, frame_id: str, stamp: Any) -> PoseStamped:
+def viewer_pose(answer: dyfos.Answer, frame_id: str, stamp: Any, into: Optional[PoseStamped] = None) -> PoseStamped:
     """Where to fly the viewer: ``viewer_position`` and a rotation by ``viewer_yaw``."""
-    return PoseStamped(
-        header=_header(frame_id, stamp),
-        pose=_pose(answer.viewer_position, dros.quaternion_from_yaw(answer.viewer_yaw)),
-    )
+    msg = PoseStamped() if into is None else into
+    return _stamped(msg, frame_id, stamp, answer.viewer_position, dros.quaternion_from_yaw(answer.viewer_yaw))
 
 
 def fill_response(response: Any, answer: dyfos.Answer, belief: Any, frame_id: str) -> Any:
@@ -129,17 +128,18 @@ def fill_response(response: Any, answer: dyfos.Answer, belief: Any, frame_id: st
     the belief's time (the rendezvous) in ``frame_id``."""
     stamp = belief.header.stamp
     response.success = True
-    response.status = ""
-    response.message = ""
-    response.x = [float(v) for v in answer.x]
+    response.x = answer.x
     response.cost = answer.cost
-    response.sensor_pose = sensor_pose(answer, frame_id, stamp)
-    response.viewer_pose = viewer_pose(answer, frame_id, stamp)
-    response.measurement_covariance = [answer.R[0][0], answer.R[0][1], answer.R[1][0], answer.R[1][1]]
-    response.posterior = PoseWithCovariance(
-        pose=belief.pose.pose,
-        covariance=dros.posterior_pose_with_covariance(answer, [0.0, 0.0, 0.0])["covariance"],
-    )
+    sensor_pose(answer, frame_id, stamp, into=response.sensor_pose)
+    viewer_pose(answer, frame_id, stamp, into=response.viewer_pose)
+    (r00, r01), (r10, r11) = answer.R
+    response.measurement_covariance = [r00, r01, r10, r11]
+    response.posterior.pose = belief.pose.pose
+    cov = [0.0] * 36
+    for i, a in enumerate(dros.COVARIANCE_INDEX):
+        for j, b in enumerate(dros.COVARIANCE_INDEX):
+            cov[6 * a + b] = answer.posterior[i][j]
+    response.posterior.covariance = cov
     response.evaluations = min(int(answer.evaluations["total"]), 2**32 - 1)
     response.map_version = answer.map_version
     response.stop = answer.stop

@@ -218,6 +218,7 @@ class DyfosNode(Node):
 
         # One client each: a map upload holds up neither a query nor the diagnostics.
         self._workers = {name: Worker(f"dyfos-{name}", connect) for name in ("query", "stream", "map", "stats")}
+        self._painter = self._workers["markers"] = Worker("dyfos-markers", None)
         self._maps = MapSync(self._map_settings, lambda line: self.get_logger().info(line))
         self._counts_lock = threading.Lock()
         self._served = 0
@@ -355,8 +356,20 @@ class DyfosNode(Node):
             self._count(status)
             return convert.fill_error(response, status, message, version)
         self._count("")
-        self._markers.publish(markers.markers(answer, mean, params, frame_id, request.belief.header.stamp))
+        self._draw(answer, mean, params, frame_id, request.belief.header.stamp)
         return convert.fill_response(response, answer, request.belief, frame_id)
+
+    def _draw(self, answer: dyfos.Answer, mean: List[float], params: Dict[str, Any], frame_id: str, stamp: Any) -> None:
+        """Publishes an answer's markers from the painter's thread: drawing them holds the
+        GIL for a while, which the response should not wait for. Only the newest waits."""
+
+        def draw(_client: None) -> None:
+            try:
+                self._markers.publish(markers.markers(answer, mean, params, frame_id, stamp))
+            except Exception as e:  # a bug, or the node shutting down: say so, keep serving
+                self.get_logger().error(f"~/markers: {type(e).__name__}: {e}", throttle_duration_sec=5.0)
+
+        self._painter.submit(draw, key="markers")
 
     def _belief(self, msg: PoseWithCovarianceStamped) -> None:
         frame_id = self._param("frame_id")
@@ -392,7 +405,7 @@ class DyfosNode(Node):
             stamp = msg.header.stamp
             self._sensor_goal.publish(convert.sensor_pose(answer, frame_id, stamp))
             self._viewer_goal.publish(convert.viewer_pose(answer, frame_id, stamp))
-            self._markers.publish(markers.markers(answer, mean, params, frame_id, stamp))
+            self._draw(answer, mean, params, frame_id, stamp)
 
         future.add_done_callback(publish)
 

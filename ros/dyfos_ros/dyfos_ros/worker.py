@@ -52,10 +52,11 @@ class Worker:
 
     Args:
         name: the thread's name.
-        connect: opens the client (raises ``dyfos.DaemonGoneError`` with no daemon).
+        connect: opens the client (raises ``dyfos.DaemonGoneError`` with no daemon);
+            ``None`` for a worker whose jobs need none (they get ``None``).
     """
 
-    def __init__(self, name: str, connect: Callable[[], dyfos.Client]) -> None:
+    def __init__(self, name: str, connect: Optional[Callable[[], dyfos.Client]]) -> None:
         self._connect = connect
         self._client: Optional[dyfos.Client] = None
         self._lock = threading.Condition()
@@ -111,7 +112,7 @@ class Worker:
                 _key, future, job = self._queue.pop(0)
                 self._running = future
             try:
-                if self._client is None:
+                if self._client is None and self._connect is not None:
                     self._client = self._connect()
                 result = job(self._client)
             except BaseException as e:  # delivered to whoever waits for the job
