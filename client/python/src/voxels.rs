@@ -98,7 +98,7 @@ impl PyVoxels {
     /// with its minimum corner at `origin + resolution·(i, j, k)`.
     #[staticmethod]
     fn from_points(py: Python<'_>, points: &[u8], resolution: f64, origin: [f64; 3]) -> PyResult<Self> {
-        if points.len() % 24 != 0 {
+        if !points.len().is_multiple_of(24) {
             return Err(to_pyerr(
                 py,
                 ErrorInfo::new("malformed_request", format!("{} bytes are not x, y, z triples of f64", points.len())),
