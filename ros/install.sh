@@ -29,7 +29,8 @@ set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/.." && pwd)"
 target="${CARGO_TARGET_DIR:-$root/target}"
-venv="${1:-$target/ros-venv}"
+# Absolute: the builds below run in other directories.
+venv="$(realpath -m "${1:-$target/ros-venv}")"
 python="${PYTHON:-python3}"
 distro=jazzy
 

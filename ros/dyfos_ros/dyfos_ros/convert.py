@@ -156,13 +156,25 @@ def fill_error(response: Any, status: str, message: str, map_version: Optional[i
     return response
 
 
+#: Longest message the node returns or logs: a request's own text (a frame name, an
+#: algorithm) comes back in it, and a client must not make the node's log grow by much.
+MAX_MESSAGE = 400
+
+
 def error_of(e: BaseException) -> Tuple[str, str, Optional[int]]:
     """``(status, message, map_version)`` of a failed request. A daemon that is not there,
     or went away during the call, is ``no_daemon``: the node reconnects by itself."""
     if isinstance(e, RequestError):
-        return e.status, e.message, None
-    if isinstance(e, dyfos.DaemonGoneError):
-        return "no_daemon", e.detail, None
-    if isinstance(e, dyfos.DyfosError):
-        return e.status, e.detail, e.map_version
-    return "internal_error", f"{type(e).__name__}: {e}", None
+        status, message, version = e.status, e.message, None
+    elif isinstance(e, dyfos.DaemonGoneError):
+        status, message, version = "no_daemon", e.detail, None
+    elif isinstance(e, dyfos.DyfosError):
+        status, message, version = e.status, e.detail, e.map_version
+    else:
+        status, message, version = "internal_error", f"{type(e).__name__}: {e}", None
+    return status, clip(message), version
+
+
+def clip(message: str) -> str:
+    """``message`` cut to :data:`MAX_MESSAGE` characters."""
+    return message if len(message) <= MAX_MESSAGE else message[: MAX_MESSAGE - 1] + "…"

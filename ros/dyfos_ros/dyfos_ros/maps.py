@@ -18,6 +18,8 @@ from typing import Any, Callable, List, Optional, Sequence
 
 import dyfos
 
+from .convert import clip
+
 # sensor_msgs/PointField datatypes, as numpy dtypes.
 _FIELD_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
 
@@ -141,7 +143,7 @@ class MapSync:
             self._send(client, s, voxels)
             self.state.error = ""
         except (MapError, dyfos.DyfosError) as e:
-            self.state.error = str(e)
+            self.state.error = clip(str(e))
             raise
 
     def _send(self, client: dyfos.Client, s: MapSettings, voxels: dyfos.Voxels) -> None:

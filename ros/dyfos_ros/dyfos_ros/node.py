@@ -421,7 +421,7 @@ class DyfosNode(Node):
             try:
                 job(client)
             except (MapError, dyfos.DyfosError) as e:
-                self.get_logger().warning(f"{what}: {e}", throttle_duration_sec=5.0)
+                self.get_logger().warning(convert.clip(f"{what}: {e}"), throttle_duration_sec=5.0)
             except Exception as e:  # a bug: say so, keep the node
                 self.get_logger().error(f"{what}: {type(e).__name__}: {e}")
 
@@ -431,7 +431,7 @@ class DyfosNode(Node):
         frame_id = self._param("frame_id")
         if convert.same_frame(msg.header.frame_id, frame_id):
             return True
-        self._maps.state.error = (
+        self._maps.state.error = convert.clip(
             f"a map on {topic} is in frame `{msg.header.frame_id}`, the node works in `{frame_id}`: "
             f"publish it in `{frame_id}` (octomap_server's frame_id)"
         )

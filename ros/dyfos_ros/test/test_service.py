@@ -99,6 +99,8 @@ def test_every_error_status(ros: Ros, daemon: Any, start_node: Any) -> None:
     no_rotation.belief.pose.pose.orientation.z = 0.0
     assert refused(no_rotation).status == "invalid_belief"
     assert refused(request(good, s, algorithm="gradient")).status == "invalid_algorithm"
+    long = refused(request(good, s, algorithm="x" * 100_000))
+    assert long.status == "invalid_algorithm" and len(long.message) <= 400, "a request cannot make the answer long"
     assert refused(request(good, s, params=parameters({"kappa": -1.0}))).status == "invalid_params"
     assert refused(request(good, s, deadline=-1.0)).status == "invalid_deadline"
     r = refused(request(0xF00, s))

@@ -89,10 +89,12 @@ def test_diagnostics_carry_the_daemons_stats_and_health(ros: Ros, daemon: Any, s
     diagnostics = ros.subscribe(DiagnosticArray, "/diagnostics")
     assert ros.call(FindSensorPose, SERVICE, request(map_id, s)).success
     assert ros.call(FindSensorPose, SERVICE, request(0xDEAD, s)).status == "unknown_map"
-    ros.spin_until(
-        lambda: diagnostics and values(status_of(diagnostics[-1], "daemon")).get("errors.unknown_map") == "1",
-        what="diagnostics counting the queries",
-    )
+
+    def counted(m: DiagnosticArray) -> bool:
+        node_side, daemon_side = values(status_of(m, "queries")), values(status_of(m, "daemon"))
+        return node_side.get("refused.unknown_map") == "1" and daemon_side.get("errors.unknown_map") == "1"
+
+    ros.spin_until(lambda: diagnostics and counted(diagnostics[-1]), what="diagnostics counting the queries")
     last = diagnostics[-1]
     daemon_status = status_of(last, "daemon")
     assert daemon_status.level == DiagnosticStatus.OK, daemon_status.message
