@@ -26,6 +26,9 @@ use pyo3::types::{PyDict, PyList};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
+mod defaults;
+mod voxels;
+
 /// A failure on its way to Python: the wire status name (or a local one), the
 /// sentence saying what to do, whether retrying may help, and the index of the
 /// failing delta for delta errors, and for rendezvous errors the version the
@@ -626,6 +629,11 @@ fn _dyfos(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyClient>()?;
     m.add_class::<PyAnswer>()?;
     m.add_function(wrap_pyfunction!(set_error_factory, m)?)?;
+    m.add_class::<voxels::PyVoxels>()?;
+    m.add_function(wrap_pyfunction!(voxels::upload_voxels, m)?)?;
+    m.add_function(wrap_pyfunction!(voxels::update_voxels, m)?)?;
+    m.add_function(wrap_pyfunction!(defaults::default_params, m)?)?;
+    m.add("MAX_DELTAS_PER_BATCH", dyfos_shared::limits::MAX_DELTAS_PER_MESSAGE)?;
     m.add("DEFAULT_PREFIX", dyfos_client::DEFAULT_PREFIX)?;
     Ok(())
 }

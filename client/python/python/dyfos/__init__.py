@@ -61,6 +61,7 @@ import os as _os
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
 
 from . import _dyfos
+from .voxels import MAX_DELTAS_PER_BATCH, Voxels
 
 __all__ = [
     "ALGORITHMS",
@@ -77,6 +78,9 @@ __all__ = [
     "NoFeasiblePoseError",
     "UnknownMapError",
     "read_scenario",
+    "default_params",
+    "MAX_DELTAS_PER_BATCH",
+    "Voxels",
 ]
 
 #: The service-name prefix ``dyfosd`` uses when given none.
@@ -297,6 +301,13 @@ def read_scenario(scenario: ScenarioLike) -> Dict[str, Any]:
     return value
 
 
+def default_params() -> Dict[str, Any]:
+    """Every SPEC §11 parameter at its default, by the names ``params`` takes
+    (``{"rover_radius": 0.75, ..., "t_vs": [0.1, 0.0, -0.05], "model": "paper"}``);
+    a new dict each call. Passing it as ``params`` is the same as passing none."""
+    return _dyfos.default_params()
+
+
 class Answer:
     """The answer to a rendezvous query (SPEC §8): where to put the camera, and the
     predicted uncertainty there. :meth:`to_dict` is what ``dyfos solve`` prints.
@@ -512,6 +523,52 @@ class Client:
             _floats(origin, 3, "origin"),
             replace,
             _seconds(timeout, "timeout"),
+        )
+
+    def upload_voxels(
+        self,
+        map_id: int,
+        voxels: "Voxels",
+        bounds: Vector,
+        sun: Vector,
+        replace: bool = False,
+        timeout: Optional[Seconds] = None,
+    ) -> int:
+        """Creates (or, with ``replace``, replaces whole) map ``map_id`` with the cells of
+        ``voxels`` (:class:`dyfos.Voxels`), ``bounds`` ``[x_min, y_min, x_max, y_max]`` and
+        ``sun`` ``(elevation, azimuth)``; returns its version. As :meth:`upload_octomap`."""
+        return _dyfos.upload_voxels(
+            self._raw,
+            map_id,
+            voxels._raw,
+            _floats(bounds, 4, "bounds"),
+            tuple(_floats(sun, 2, "sun")),
+            replace,
+            _seconds(timeout, "timeout"),
+        )
+
+    def update_voxels(
+        self,
+        map_id: int,
+        previous: "Voxels",
+        voxels: "Voxels",
+        expected_version: Optional[int] = None,
+        timeout: Optional[Seconds] = None,
+    ) -> Optional[int]:
+        """Sends the cells that changed from ``previous`` (what map ``map_id`` holds) to
+        ``voxels`` as one atomic batch of ``SetVoxelBlocks`` deltas (freed cells, then
+        occupied ones); returns the new version, or ``None`` when nothing changed
+        (nothing is sent).
+
+        Raises:
+            MapVersionMismatchError: the map is not at ``expected_version``; nothing changed.
+            InvalidRequestError: ``invalid_delta`` if the two differ in resolution or
+                origin (:meth:`Voxels.change_records` is ``None``): upload the new one.
+            BusyError: ``over_capacity`` if the change needs more than
+                :data:`MAX_DELTAS_PER_BATCH` records: upload the new one whole.
+        """
+        return _dyfos.update_voxels(
+            self._raw, map_id, previous._raw, voxels._raw, expected_version, _seconds(timeout, "timeout")
         )
 
     def create_map(

@@ -3,6 +3,10 @@
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 DEFAULT_PREFIX: str
+MAX_DELTAS_PER_BATCH: int
+
+def default_params() -> Dict[str, Any]:
+    """Every SPEC §11 parameter at its default, by name."""
 
 def set_error_factory(factory: Callable[[str, str, bool, Optional[int], Optional[int]], BaseException]) -> None:
     """Registers the callable that makes the exception to raise for a failure."""
@@ -105,3 +109,37 @@ class RawClient:
         count: int,
         timeout: Optional[float] = None,
     ) -> List[float]: ...
+
+class RawVoxels:
+    """The occupied cells of a voxel map (``dyfos_shared::world::VoxelGrid``)."""
+
+    @staticmethod
+    def from_octomap(bt: bytes, origin: Sequence[float]) -> RawVoxels: ...
+    @staticmethod
+    def from_octomap_data(tree_id: str, resolution: float, data: bytes, origin: Sequence[float]) -> RawVoxels: ...
+    @staticmethod
+    def from_points(points: bytes, resolution: float, origin: Sequence[float]) -> RawVoxels: ...
+    def __len__(self) -> int: ...
+    @property
+    def resolution(self) -> float: ...
+    @property
+    def origin(self) -> List[float]: ...
+    def change_records(self, previous: RawVoxels) -> Optional[int]: ...
+
+def upload_voxels(
+    client: RawClient,
+    map_id: int,
+    voxels: RawVoxels,
+    bounds: Sequence[float],
+    sun: Tuple[float, float],
+    replace: bool = False,
+    timeout: Optional[float] = None,
+) -> int: ...
+def update_voxels(
+    client: RawClient,
+    map_id: int,
+    previous: RawVoxels,
+    voxels: RawVoxels,
+    expected_version: Optional[int] = None,
+    timeout: Optional[float] = None,
+) -> Optional[int]: ...

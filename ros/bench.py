@@ -1,0 +1,189 @@
+"""The ROS 2 layer's cost: the same rendezvous query through ``~/find_sensor_pose`` (a
+client in this process, the ``dyfos-ros`` node in another, Fast DDS between them) and
+through the ``dyfos`` binding's direct call, in alternating blocks against one
+``dyfosd``, so both see the same machine load.
+
+    VENV/bin/python ros/bench.py --dyfosd target/release/dyfosd [--rounds 20 --count 50]
+
+Starts its own dyfosd (own prefix, iceoryx2 domain and state directory) and node (own
+ROS domain id, discovery on this machine only), uploads ``tests/data/example.json``, and
+prints per algorithm the median and p99 of each path and the difference of the
+medians. A third path is ROS's own floor: the same request to a server in another
+process that answers at once without asking any daemon. ``--json FILE`` keeps the raw
+samples. Run it in the venv of ``ros/install.sh``
+(with a release binding: ``DYFOS_BINDING=target/release/lib_dyfos.so``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Dict, List
+
+import dyfos
+from dyfos import ros as dros
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def percentile(samples: List[float], q: float) -> float:
+    s = sorted(samples)
+    return s[min(len(s) - 1, int(q * len(s)))]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--dyfosd", default=str(ROOT / "target" / "release" / "dyfosd"))
+    ap.add_argument("--node", default=str(Path(sys.executable).parent / "dyfos-ros"))
+    ap.add_argument("--algorithms", default="center,dyfos")
+    ap.add_argument("--rounds", type=int, default=20, help="blocks of each path per algorithm")
+    ap.add_argument("--count", type=int, default=50, help="queries per block")
+    ap.add_argument("--domain-id", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "87")))
+    ap.add_argument("--json", help="write every sample (seconds) here")
+    ap.add_argument("--serve-echo", action="store_true", help=argparse.SUPPRESS)  # the floor's server
+    args = ap.parse_args()
+    if args.serve_echo:
+        serve_echo()
+        return
+
+    os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    os.environ.setdefault("ROS_LOG_DIR", str(ROOT / "target" / "ros-log"))
+    import rclpy
+    from dyfos_msgs.srv import FindSensorPose
+
+    pid = os.getpid()
+    prefix, domain = f"rosbench-{pid}/", f"rb{pid}_"
+    state = tempfile.mkdtemp(prefix="dyfos-rosbench-")
+    daemon = subprocess.Popen(
+        [args.dyfosd, "--prefix", prefix, "--domain", domain, "--state-dir", state], stderr=subprocess.DEVNULL
+    )
+    node = echo = None
+    try:
+        client = dyfos.Client(prefix=prefix, domain=domain, timeout=30.0, connect_timeout=30.0)
+        scenario = dyfos.read_scenario(ROOT / "tests" / "data" / "example.json")
+        map_id = client.upload_scenario(scenario)
+        node = subprocess.Popen(
+            [args.node, "--ros-args", "-p", f'prefix:="{prefix}"', "-p", f'domain:="{domain}"', "--log-level", "warn"]
+        )
+        echo = subprocess.Popen([sys.executable, __file__, "--serve-echo"])
+        rclpy.init()
+        ros = rclpy.create_node(f"rosbench_{pid}")
+        service = ros.create_client(FindSensorPose, "/dyfos/find_sensor_pose")
+        floor = ros.create_client(FindSensorPose, "/rosbench_echo/find_sensor_pose")
+        end = time.monotonic() + 30.0
+        while not (service.service_is_ready() and floor.service_is_ready()):
+            if time.monotonic() > end:
+                raise SystemExit("the node's service did not appear within 30 s")
+            rclpy.spin_once(ros, timeout_sec=0.05)
+
+        belief = dros.belief_to_pose_with_covariance(scenario["rover"]["mean"], scenario["rover"]["cov"])
+        yaw = dros.yaw_from_quaternion(belief["pose"]["orientation"])
+        mean, cov = [scenario["rover"]["mean"][0], scenario["rover"]["mean"][1], yaw], scenario["rover"]["cov"]
+
+        def ros_call(algorithm: str, to: Any = service) -> float:
+            req = FindSensorPose.Request(map_id=map_id, algorithm=algorithm, seed=1)
+            req.belief.header.frame_id = "map"
+            p, o = belief["pose"]["position"], belief["pose"]["orientation"]
+            req.belief.pose.pose.position.x, req.belief.pose.pose.position.y = p["x"], p["y"]
+            q = req.belief.pose.pose.orientation
+            q.x, q.y, q.z, q.w = o["x"], o["y"], o["z"], o["w"]
+            req.belief.pose.covariance = belief["covariance"]
+            start = time.perf_counter()
+            future = to.call_async(req)
+            while not future.done():  # jazzy: not spin_until_future_complete (ROS2.md, Q2)
+                rclpy.spin_once(ros, timeout_sec=1.0)
+            took = time.perf_counter() - start
+            assert future.result().success, future.result().message
+            return took
+
+        def direct_call(algorithm: str) -> float:
+            start = time.perf_counter()
+            client.rendezvous(map_id, mean, cov, algorithm=algorithm, seed=1)
+            return time.perf_counter() - start
+
+        load = f"{os.getloadavg()[0]:.1f}"
+        samples: Dict[str, Dict[str, List[float]]] = {}
+        for algorithm in args.algorithms.split(","):
+            got = samples[algorithm] = {"direct": [], "ros": [], "ros floor": []}
+            for _ in range(args.count):  # warm up every path
+                ros_call(algorithm)
+                ros_call(algorithm, floor)
+                direct_call(algorithm)
+            for _ in range(args.rounds):
+                got["direct"] += [direct_call(algorithm) for _ in range(args.count)]
+                got["ros"] += [ros_call(algorithm) for _ in range(args.count)]
+                got["ros floor"] += [ros_call(algorithm, floor) for _ in range(args.count)]
+
+        print(f"load average before: {load}, after: {os.getloadavg()[0]:.1f}")
+        print(f"machine: {platform.node()}, {os.cpu_count()} cores, {cpu_model()}; {time.strftime('%Y-%m-%d')}")
+        print(f"{args.rounds} alternating blocks of {args.count} queries per path and algorithm\n")
+        print("| algorithm | path | median (ms) | p99 (ms) |")
+        print("|---|---|---|---|")
+        for algorithm, got in samples.items():
+            for path in ("direct", "ros", "ros floor"):
+                s = got[path]
+                print(f"| {algorithm} | {path} | {statistics.median(s) * 1e3:.3f} | {percentile(s, 0.99) * 1e3:.3f} |")
+            med = {path: statistics.median(got[path]) for path in got}
+            print(f"| {algorithm} | ros − direct (medians) | {(med['ros'] - med['direct']) * 1e3:.3f} | |")
+            print(
+                f"| {algorithm} | ros − direct − ros floor | {(med['ros'] - med['direct'] - med['ros floor']) * 1e3:.3f} | |"
+            )
+        if args.json:
+            Path(args.json).write_text(json.dumps(samples))
+        ros.destroy_node()
+        rclpy.try_shutdown()
+        client.close()
+    finally:
+        for p in (node, echo):
+            if p is not None:
+                p.send_signal(signal.SIGINT)
+                p.wait(timeout=30)
+        daemon.terminate()
+        daemon.wait(timeout=30)
+        shutil.rmtree(state, ignore_errors=True)
+
+
+def serve_echo() -> None:
+    """A FindSensorPose server that answers at once (success, all else zero)."""
+    import rclpy
+    from dyfos_msgs.srv import FindSensorPose
+    from rclpy.executors import ExternalShutdownException
+
+    def answer(request: Any, response: Any) -> Any:
+        response.success = True
+        return response
+
+    rclpy.init()
+    node = rclpy.create_node("rosbench_echo")
+    node.create_service(FindSensorPose, "~/find_sensor_pose", answer)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# The ROS 2 tests: dyfos_ros against real rclpy and Fast DDS (ros/dyfos_ros/test).
+#
+#   bash ros/test.sh [pytest args...]
+#
+# Builds the workspace (a no-op after scripts/test's build), installs ROS 2 jazzy,
+# the interfaces, the binding the build made and dyfos_ros into target/ros-venv
+# (ros/install.sh; seconds when it is there already), then runs pytest against
+# target/debug's dyfosd and dyfos. DDS discovery stays on this machine
+# (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), each test takes a ROS domain id no other
+# test holds, and ROS's logs go to target/ros-log.
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+root="$(cd "$here/.." && pwd)"
+target="${CARGO_TARGET_DIR:-$root/target}"
+venv="$target/ros-venv"
+
+# --all-targets as scripts/test builds, so the features match and nothing is built twice.
+(cd "$root" && cargo build --quiet --workspace --all-targets)
+DYFOS_BINDING="$target/debug/lib_dyfos.so" bash "$here/install.sh" "$venv"
+if ! "$venv/bin/python" -c "import pytest" 2>/dev/null; then
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "pytest>=7"
+fi
+
+# Another RMW than the one the wheels link exits with 102; a domain id from outside
+# would put every test on one domain.
+unset RMW_IMPLEMENTATION ROS_DOMAIN_ID ROS_LOCALHOST_ONLY
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ROS_LOG_DIR="$target/ros-log"
+export DYFOSD="$target/debug/dyfosd" DYFOS="$target/debug/dyfos" DYFOS_TEST_DATA="$root/tests/data"
+export DYFOS_ROS="$venv/bin/dyfos-ros"
+status=0
+(cd "$here/dyfos_ros" && "$venv/bin/python" -m pytest test -q -p no:cacheprovider "$@") || status=$?
+if [ "$status" -eq 5 ]; then
+    echo "ros/test.sh: pytest collected no tests" >&2
+    exit 1
+fi
+exit "$status"
