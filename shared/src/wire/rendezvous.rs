@@ -31,7 +31,7 @@
 //! assert_eq!(RendezvousRequest::decode(&bad, &[]).unwrap_err().status.name(), "invalid_belief");
 //! ```
 
-use super::map::{MapId, WireDelta, decode_deltas, encode_deltas};
+use super::map::{MapId, WireDelta, decode_batch, encode_deltas};
 use super::{ANY_VERSION, Detail, Rejection, Status};
 use crate::answer::{Algorithm, Answer, EvalStats, StopReason};
 use crate::limits::{MAX_DEADLINE_MICROS, MAX_INLINE_DELTAS};
@@ -400,7 +400,7 @@ impl RendezvousRequest {
                 ),
             ));
         }
-        let deltas = decode_deltas(records)?;
+        let deltas = decode_batch(records)?;
         let request = RendezvousRequest {
             map: h.map_id,
             expected_version: (h.expected_version != ANY_VERSION).then_some(h.expected_version),
