@@ -99,7 +99,7 @@ fn an_uploads_content_may_come_in_any_order() {
     let origin = na::Point3::new(-1.0, -1.0, 0.0);
     let cells = |c: Vec<[i64; 3]>| MapDelta::SetVoxels { resolution: 0.25, origin, cells: c, occupied: true };
     let blocks = |b: Vec<VoxelBlock>| MapDelta::SetVoxelBlocks { resolution: 0.25, origin, blocks: b, occupied: true };
-    let chunks = vec![
+    let chunks = [
         vec![cells(vec![[1, 2, 3]]), pole(1, 1.0), blocks(vec![VoxelBlock { min: [8, 0, 4], mask: 0b1011 }])],
         vec![pole(2, -2.0), cells(vec![[40, 2, 0], [1, 2, 3]]), pole(1, 5.0)],
         vec![blocks(vec![VoxelBlock { min: [-4, -8, 0], mask: 1 << 63 }]), pole(3, 0.0)],

@@ -882,7 +882,7 @@ fn documented_client_port_settings_loan_every_size_a_request_may_have() {
 
     let plain = map.client_builder().create().expect("a client with iceoryx2's defaults");
     assert!(plain.loan_slice_uninit(1).is_ok());
-    let refused = plain.loan_slice_uninit(2).err().expect("by default a loan of 2 records fails");
+    let Err(refused) = plain.loan_slice_uninit(2) else { panic!("by default a loan of 2 records fails") };
     assert!(format!("{refused:?}").contains("ExceedsMaxLoanSize"), "{refused:?}");
 
     let (len, strategy) = setting("<prefix>rendezvous");
