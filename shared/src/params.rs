@@ -134,7 +134,17 @@ impl Params {
     /// derived position or distance can overflow. Any physically meaningful value
     /// passes.
     pub fn validate(&self) -> Result<(), ParamError> {
+        self.validate_given(|_| true)
+    }
+
+    /// [`Params::validate`] for parameters of which only those `given(name)` says
+    /// were chosen (the others are SPEC defaults): when a pair is out of order
+    /// (`z_min < z_max`, `rho_min < rho_max`), the error names the one chosen, not
+    /// a default the caller never set. With both chosen, or neither, it names
+    /// `z_max` and `rho_min`, as [`Params::validate`] does.
+    pub fn validate_given(&self, given: impl Fn(&str) -> bool) -> Result<(), ParamError> {
         let p = self;
+        let only = |chosen: &str, default: &str| given(chosen) && !given(default);
         require("rover_radius", p.rover_radius, p.rover_radius > 0.0, "must be > 0")?;
         require("viewer_radius", p.viewer_radius, p.viewer_radius > 0.0, "must be > 0")?;
         require("marker_size", p.marker_size, p.marker_size > 0.0, "must be > 0")?;
@@ -143,6 +153,9 @@ impl Params {
         require("f_h", p.f_h, p.f_h > 0.0 && p.f_h < PI, "must be in (0, π)")?;
         require("f_v", p.f_v, p.f_v > 0.0 && p.f_v < PI, "must be in (0, π)")?;
         require("z_min", p.z_min, p.z_min >= 0.0, "must be >= 0")?;
+        if only("z_min", "z_max") {
+            require_with("z_min", p.z_min, p.z_min < p.z_max, || format!("must be < z_max = {}", p.z_max))?;
+        }
         require_with("z_max", p.z_max, p.z_max > p.z_min, || format!("must be > z_min = {}", p.z_min))?;
         require("camera_pitch", p.camera_pitch, p.camera_pitch.abs() <= FRAC_PI_2, "must be in [-π/2, π/2]")?;
         for (i, v) in p.t_vs.iter().enumerate() {
@@ -150,6 +163,9 @@ impl Params {
             require(field, *v, v.abs() <= MAX_COORDINATE, "must be within ±1e6 m")?;
         }
         require("rho_min", p.rho_min, p.rho_min > 0.0, "must be > 0")?;
+        if only("rho_max", "rho_min") {
+            require_with("rho_max", p.rho_max, p.rho_max > p.rho_min, || format!("must be > rho_min = {}", p.rho_min))?;
+        }
         require_with("rho_min", p.rho_min, p.rho_min < p.rho_max, || format!("must be < rho_max = {}", p.rho_max))?;
         require("rho_max", p.rho_max, p.rho_max <= MAX_COORDINATE, "must be <= 1e6")?;
         require("kappa", p.kappa, p.kappa > 0.0, "must be > 0")?;

@@ -429,20 +429,13 @@ fn tag_name(delta: &MapDelta) -> &'static str {
 fn documented_delta_tags_and_flags_are_the_rust_ones() {
     let all = tables(DOC);
     let (t, documented) = codes(&all, "tag");
-    let expected = vec![
-        (tag::UPSERT_CYLINDER, "UPSERT_CYLINDER"),
-        (tag::UPSERT_BOX, "UPSERT_BOX"),
-        (tag::REMOVE_OBSTACLE, "REMOVE_OBSTACLE"),
-        (tag::VOXEL_RUN, "VOXEL_RUN"),
-        (tag::VOXEL_CELL, "VOXEL_CELL"),
-        (tag::SET_SUN, "SET_SUN"),
-        (tag::SET_BOUNDS, "SET_BOUNDS"),
-        (tag::CLEAR, "CLEAR"),
-        (tag::VOXEL_BLOCK_RUN, "VOXEL_BLOCK_RUN"),
-        (tag::VOXEL_BLOCK, "VOXEL_BLOCK"),
-    ];
-    let expected: Vec<(u64, String)> = expected.into_iter().map(|(n, s)| (u64::from(n), s.to_string())).collect();
+    let expected: Vec<(u64, String)> = tag::ALL.iter().map(|(n, s)| (u64::from(*n), s.to_string())).collect();
     same_rows("delta tags", t, rows(&documented), rows(&expected));
+    // The range the text states, and the one an unknown tag's error message gives.
+    let (first, last) = (tag::ALL[0].0, tag::ALL[tag::ALL.len() - 1].0);
+    assert!(DOC.contains(&format!("Tags are {first} ..= {last}; any other is `malformed_delta`")), "docs/wire.md §4.2");
+    let refused = decode_deltas(&[WireDelta { tag: last + 1, ..WireDelta::default() }]).unwrap_err();
+    assert!(refused.message.contains(&format!("{last} (VOXEL_BLOCK)")), "{refused}");
     let by_name: BTreeMap<&str, u32> = documented.iter().map(|(n, s)| (s.as_str(), *n as u32)).collect();
 
     // Every kind of delta encodes with its documented tag (a voxel run's cells too).
@@ -536,16 +529,7 @@ fn documented_operations_modes_algorithms_models_and_stops_are_the_rust_ones() {
     let all = tables(DOC);
 
     let (t, documented) = codes(&all, "op");
-    let expected: Vec<(u64, String)> = [
-        (op::CREATE, "CREATE"),
-        (op::APPLY, "APPLY"),
-        (op::UPLOAD, "UPLOAD"),
-        (op::SNAPSHOT, "SNAPSHOT"),
-        (op::DELETE, "DELETE"),
-    ]
-    .into_iter()
-    .map(|(n, s)| (u64::from(n), s.to_string()))
-    .collect();
+    let expected: Vec<(u64, String)> = op::ALL.iter().map(|(n, s)| (u64::from(*n), s.to_string())).collect();
     same_rows("map operations", t, rows(&documented), rows(&expected));
     for o in 0..=256u32 {
         let refused = MapRequest::decode(&MapRequestHeader { op: o, ..MapRequestHeader::default() }, &[])
@@ -698,6 +682,8 @@ fn documented_constants_are_the_rust_ones() {
         ("MAX_VOXEL_BLOCKS_SPANNED", dyfos_shared::limits::MAX_VOXEL_BLOCKS_SPANNED.to_string()),
         ("MAX_PERIMETER_POINTS", MAX_PERIMETER_POINTS.to_string()),
         ("MAX_DEADLINE_MICROS", MAX_DEADLINE_MICROS.to_string()),
+        ("MAX_COORDINATE", dyfos_shared::limits::MAX_COORDINATE.to_string()),
+        ("MAX_VOXEL_INDEX", dyfos_shared::limits::MAX_VOXEL_INDEX.to_string()),
         ("max_clients", config.max_clients.to_string()),
         ("max_requests_per_client", config.max_requests_per_client.to_string()),
         ("max_queued", config.max_queued.to_string()),
@@ -786,6 +772,8 @@ fn documented_services_and_limits_are_what_dyfosd_creates() {
                         rr.max_borrowed_responses_per_pending_response()
                     ),
                     format!("fire_and_forget_requests {}", rr.does_support_fire_and_forget_requests()),
+                    format!("enable_safe_overflow_for_requests {}", rr.has_safe_overflow_for_requests()),
+                    format!("enable_safe_overflow_for_responses {}", rr.has_safe_overflow_for_responses()),
                 ]);
                 [
                     format!("`{name}`"),
@@ -797,10 +785,25 @@ fn documented_services_and_limits_are_what_dyfosd_creates() {
                 ]
             }
             MessagingPattern::Event(e) => {
+                let or_none = |v: Option<String>| v.unwrap_or_else(|| "none".to_string());
                 event_settings.push(vec![
                     format!("max_nodes {}", e.max_nodes()),
                     format!("max_notifiers {}", e.max_notifiers()),
                     format!("max_listeners {}", e.max_listeners()),
+                    format!("event_id_max_value {}", e.event_id_max_value()),
+                    format!("deadline {}", or_none(e.deadline().map(|d| format!("{d:?}")))),
+                    format!(
+                        "notifier_created_event {}",
+                        or_none(e.notifier_created_event().map(|v| v.as_value().to_string()))
+                    ),
+                    format!(
+                        "notifier_dropped_event {}",
+                        or_none(e.notifier_dropped_event().map(|v| v.as_value().to_string()))
+                    ),
+                    format!(
+                        "notifier_dead_event {}",
+                        or_none(e.notifier_dead_event().map(|v| v.as_value().to_string()))
+                    ),
                 ]);
                 let none = "—".to_string();
                 [format!("`{name}`"), "event".to_string(), none.clone(), none.clone(), none.clone(), none]
@@ -826,6 +829,98 @@ fn documented_services_and_limits_are_what_dyfosd_creates() {
             .collect();
         for s in settings {
             same_rows(first, t, documented.clone(), s);
+        }
+    }
+}
+
+/// §2's client port settings: without them a loan of 2 records fails (what a
+/// literal reader hit first); with them a client loans every size a request may have.
+#[test]
+fn documented_client_port_settings_loan_every_size_a_request_may_have() {
+    use iceoryx2::prelude::*;
+
+    let all = tables(DOC);
+    let t = table(&all, "client port");
+    let header: Vec<&str> = t.header.iter().map(|h| code(h)).collect();
+    assert_eq!(header, ["client port", "initial_max_slice_len", "allocation_strategy"], "docs/wire.md line {}", t.line);
+    let setting = |service: &str| {
+        let row = t.rows.iter().find(|r| code(&r[0]) == service).unwrap_or_else(|| panic!("no row for `{service}`"));
+        let strategy = match code(&row[2]) {
+            "PowerOfTwo" => AllocationStrategy::PowerOfTwo,
+            "BestFit" => AllocationStrategy::BestFit,
+            "Static" => AllocationStrategy::Static,
+            other => panic!("docs/wire.md line {}: `{other}` is not an allocation strategy", t.line),
+        };
+        (int(&row[1]) as usize, strategy)
+    };
+    assert_eq!(t.rows.len(), 2, "docs/wire.md line {}: one row per service with slices", t.line);
+
+    let sandbox = Sandbox::new("wire-doc-loan");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut config = iceoryx2::config::Config::default();
+    config.global.prefix = FileName::new(sandbox.domain.as_bytes()).expect("domain");
+    let node = NodeBuilder::new()
+        .config(&config)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .expect("node");
+    let names = ServiceNames::new(&sandbox.prefix).expect("prefix");
+    let name = |s: &str| ServiceName::new(s).expect("service name");
+    let rendezvous = node
+        .service_builder(&name(&names.rendezvous))
+        .request_response::<[WireDelta], RendezvousReply>()
+        .request_user_header::<RendezvousRequestHeader>()
+        .open()
+        .expect("open rendezvous");
+    let map = node
+        .service_builder(&name(&names.map))
+        .request_response::<[WireDelta], [WireDelta]>()
+        .request_user_header::<MapRequestHeader>()
+        .response_user_header::<MapReplyHeader>()
+        .open()
+        .expect("open map");
+
+    let plain = map.client_builder().create().expect("a client with iceoryx2's defaults");
+    assert!(plain.loan_slice_uninit(1).is_ok());
+    let Err(refused) = plain.loan_slice_uninit(2) else { panic!("by default a loan of 2 records fails") };
+    assert!(format!("{refused:?}").contains("ExceedsMaxLoanSize"), "{refused:?}");
+
+    let (len, strategy) = setting("<prefix>rendezvous");
+    let client = rendezvous.client_builder().initial_max_slice_len(len).allocation_strategy(strategy).create().unwrap();
+    for n in [0, 2, len, len + 1, MAX_INLINE_DELTAS] {
+        assert!(client.loan_slice_uninit(n).is_ok(), "a rendezvous loan of {n} records");
+    }
+    let (len, strategy) = setting("<prefix>map");
+    let client = map.client_builder().initial_max_slice_len(len).allocation_strategy(strategy).create().unwrap();
+    for n in [0, 2, len, len + 1, MAX_DELTAS_PER_MESSAGE] {
+        assert!(client.loan_slice_uninit(n).is_ok(), "a map loan of {n} records");
+    }
+}
+
+/// What shared memory a daemon stopped by SIGTERM leaves is what the README and
+/// this document say (iceoryx2's per-domain node counter), named as they name it
+/// for the default domain.
+#[test]
+fn the_shared_memory_a_stopped_daemon_leaves_is_documented() {
+    const README: &str = include_str!("../../README.md");
+    let sandbox = Sandbox::new("wire-doc-shm");
+    let mut daemon = sandbox.start_daemon(&[]);
+    sandbox.client().stats(std::time::Duration::from_secs(30)).expect("stats");
+    assert!(daemon.terminate().success(), "{}", daemon.log());
+    let left: Vec<String> = std::fs::read_dir("/dev/shm")
+        .expect("/dev/shm")
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(&sandbox.domain))
+        .collect();
+    assert!(!left.is_empty(), "iceoryx2's node counter is expected to stay");
+    for file in left {
+        let default_domain = file.replacen(&sandbox.domain, "iox2_", 1);
+        for (doc, text) in [("README.md", README), ("docs/wire.md", DOC)] {
+            assert!(
+                text.contains(&format!("/dev/shm/{default_domain}")),
+                "{doc} does not name `{file}` a stopped daemon left"
+            );
         }
     }
 }

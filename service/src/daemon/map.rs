@@ -58,14 +58,20 @@ pub(crate) fn check_version(id: MapId, world: &World, expected: Option<u64>) -> 
     }
 }
 
-pub(crate) fn invalid_delta(e: MapDeltaError) -> Rejection {
-    // A map past its cell limits is a capacity refusal, not a malformed change.
-    let status = match e.kind {
+/// The code of a delta the map refused: a map past its obstacle or cell limits is a
+/// capacity refusal (`over_capacity`), anything else an invalid change.
+fn delta_status(kind: &MapDeltaErrorKind) -> Status {
+    match kind {
         MapDeltaErrorKind::Voxels(VoxelError::TooManyCells { .. } | VoxelError::GridTooLarge { .. })
         | MapDeltaErrorKind::TooManyObstacles { .. } => Status::OverCapacity,
         _ => Status::InvalidDelta,
-    };
-    Rejection::at_delta(status, format!("{e}; nothing was applied"), e.index as u64)
+    }
+}
+
+/// The refusal of a batch one of whose deltas the map refused, naming that delta
+/// (`error_index`), with `over_capacity` too: the delta that passed the limit.
+pub(crate) fn invalid_delta(e: MapDeltaError) -> Rejection {
+    Rejection::at_delta(delta_status(&e.kind), format!("{e}; nothing was applied"), e.index as u64)
 }
 
 /// A map's snapshot pages, each a self-contained chunk of records.
@@ -81,6 +87,8 @@ struct Upload {
     bounds: Bounds,
     sun: Sun,
     deltas: Vec<MapDelta>,
+    /// Where each chunk's deltas start in `deltas`, to name a delta's chunk.
+    starts: Vec<usize>,
     /// Obstacle upserts and voxel cells buffered so far, bounded by what one map
     /// may hold, so that chunks cannot grow the daemon's memory without limit
     /// before the upload completes.
@@ -112,6 +120,32 @@ impl Upload {
             ));
         }
         Ok(())
+    }
+
+    /// Takes in a chunk's `deltas`, counted already.
+    fn take(&mut self, deltas: Vec<MapDelta>) {
+        self.starts.push(self.deltas.len());
+        self.deltas.extend(deltas);
+    }
+
+    /// The refusal of an upload whose map cannot be built from its content, found
+    /// when its last chunk arrived: the detail names the chunk and the delta in it.
+    /// `error_index` is none, as the delta may be in another chunk than the one
+    /// this replies to.
+    fn content_error(&self, map: MapId, e: MapDeltaError) -> Rejection {
+        let status = delta_status(&e.kind);
+        let message = if status == Status::OverCapacity {
+            // The cells of all chunks together: no one delta is at fault.
+            format!("upload {} of map {map}: {}; nothing changed", self.upload_id, e.kind)
+        } else {
+            let chunk = self.starts.partition_point(|start| *start <= e.index).saturating_sub(1);
+            let within = e.index - self.starts.get(chunk).copied().unwrap_or(0);
+            format!(
+                "upload {} of map {map}, chunk {chunk}, delta #{within}: {}; nothing changed",
+                self.upload_id, e.kind
+            )
+        };
+        Rejection::new(status, message)
     }
 }
 
@@ -397,7 +431,7 @@ impl Maps {
                     self.abandon(map, &u, "past a map's limits");
                     return Err(e);
                 }
-                u.deltas.extend(deltas);
+                u.take(deltas);
                 u.next += 1;
                 u.last_chunk = Instant::now();
             }
@@ -431,7 +465,7 @@ impl Maps {
             }
             None => 0,
         };
-        let world = world_from_content(version, u.bounds, u.sun, &u.deltas).map_err(invalid_delta)?;
+        let world = world_from_content(version, u.bounds, u.sun, &u.deltas).map_err(|e| u.content_error(map, e))?;
         let what = format!("uploaded ({} chunks)", u.chunk_count);
         Ok(self.commit(map, world, &what, ChangeCause::Upload)?.version())
     }
@@ -463,12 +497,13 @@ impl Maps {
             bounds,
             sun,
             deltas: Vec::new(),
+            starts: Vec::new(),
             obstacles: 0,
             cells: 0,
             last_chunk: Instant::now(),
         };
         upload.count(&deltas)?;
-        upload.deltas = deltas;
+        upload.take(deltas);
         self.uploads.insert(map, upload);
         Ok(())
     }
@@ -560,6 +595,11 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
             })?;
             maps.maps.remove(&map);
             maps.generations.remove(&map);
+            // An upload in progress would otherwise make the map again at its last
+            // chunk, undoing the delete: its later chunks get `chunk_incomplete`.
+            if let Some(upload) = maps.uploads.remove(&map) {
+                maps.abandon(map, &upload, "its map was deleted");
+            }
             maps.record(map, ChangeCause::Delete, None, Vec::new(), None, world.version());
             info!(map, version = world.version(), "map deleted");
             Ok(ok(map, world.version()))

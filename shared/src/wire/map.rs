@@ -30,38 +30,66 @@
 use super::{ANY_VERSION, Detail, Rejection, Status};
 use crate::limits::{MAX_DELTAS_PER_MESSAGE, MAX_UPLOAD_CHUNKS};
 use crate::math::{Point2, Point3};
-use crate::world::{AxisBox, Bounds, MapDelta, Obstacle, Sun, VerticalCylinder, VoxelBlock, World};
+use crate::world::{
+    AxisBox, Bounds, CellIndex, MapDelta, MapDeltaError, MapDeltaErrorKind, Obstacle, Sun, VerticalCylinder,
+    VoxelBlock, VoxelError, VoxelGrid, World,
+};
 use iceoryx2::prelude::ZeroCopySend;
 
 /// A map id, chosen by the client that creates the map.
 pub type MapId = u64;
 
-/// Record tags of [`WireDelta`].
-pub mod tag {
-    /// Upsert a vertical cylinder: `id`, values `[x, y, radius, height]`.
-    pub const UPSERT_CYLINDER: u32 = 1;
-    /// Upsert an axis-aligned box: `id`, values `[min x, y, z, max x, y, z]`.
-    pub const UPSERT_BOX: u32 = 2;
-    /// Remove obstacle `id`.
-    pub const REMOVE_OBSTACLE: u32 = 3;
-    /// Voxel run header: values `[resolution, origin x, y, z]`, `flag` 1 occupied /
-    /// 0 free, `cell[0]` the number of [`VOXEL_CELL`] records that follow.
-    pub const VOXEL_RUN: u32 = 4;
-    /// One cell of the preceding run: `cell`.
-    pub const VOXEL_CELL: u32 = 5;
-    /// Set the sun: values `[elevation, azimuth]`.
-    pub const SET_SUN: u32 = 6;
-    /// Set the bounds: values `[x_min, y_min, x_max, y_max]`.
-    pub const SET_BOUNDS: u32 = 7;
-    /// Remove every obstacle and voxel.
-    pub const CLEAR: u32 = 8;
-    /// Voxel block run header: as [`VOXEL_RUN`], `cell[0]` the number of
-    /// [`VOXEL_BLOCK`] records that follow.
-    pub const VOXEL_BLOCK_RUN: u32 = 9;
-    /// One 4³ block of the preceding block run: `cell` its minimum cell (each index a
-    /// multiple of 4), the 64-bit cell mask in `id` (low half) and `flag` (high half);
-    /// cell `cell + (x, y, z)` is bit `16x + 4y + z`.
-    pub const VOXEL_BLOCK: u32 = 10;
+/// A module of `u32` wire codes: one constant per code, plus `ALL`, every code with
+/// its constant's name in code order, from which documentation checks and error
+/// messages take the valid codes (so a new code cannot be left out of them).
+macro_rules! wire_codes {
+    ($(#[$m:meta])* $module:ident { $($(#[$doc:meta])* $name:ident = $value:literal;)* }) => {
+        $(#[$m])*
+        pub mod $module {
+            $($(#[$doc])* pub const $name: u32 = $value;)*
+            /// Every code and its constant's name, in code order.
+            pub const ALL: &[(u32, &str)] = &[$(($name, stringify!($name)),)*];
+
+            /// The valid codes for an error message, e.g. `1 (UPSERT_CYLINDER) ..= 10
+            /// (VOXEL_BLOCK)`: the codes are consecutive (a unit test checks it).
+            pub fn range() -> String {
+                match (ALL.first(), ALL.last()) {
+                    (Some((a, first)), Some((b, last))) => format!("{a} ({first}) ..= {b} ({last})"),
+                    _ => String::new(),
+                }
+            }
+        }
+    };
+}
+
+wire_codes! {
+    /// Record tags of [`WireDelta`].
+    tag {
+        /// Upsert a vertical cylinder: `id`, values `[x, y, radius, height]`.
+        UPSERT_CYLINDER = 1;
+        /// Upsert an axis-aligned box: `id`, values `[min x, y, z, max x, y, z]`.
+        UPSERT_BOX = 2;
+        /// Remove obstacle `id`.
+        REMOVE_OBSTACLE = 3;
+        /// Voxel run header: values `[resolution, origin x, y, z]`, `flag` 1 occupied /
+        /// 0 free, `cell[0]` the number of [`VOXEL_CELL`] records that follow.
+        VOXEL_RUN = 4;
+        /// One cell of the preceding run: `cell`.
+        VOXEL_CELL = 5;
+        /// Set the sun: values `[elevation, azimuth]`.
+        SET_SUN = 6;
+        /// Set the bounds: values `[x_min, y_min, x_max, y_max]`.
+        SET_BOUNDS = 7;
+        /// Remove every obstacle and voxel.
+        CLEAR = 8;
+        /// Voxel block run header: as [`VOXEL_RUN`], `cell[0]` the number of
+        /// [`VOXEL_BLOCK`] records that follow.
+        VOXEL_BLOCK_RUN = 9;
+        /// One 4³ block of the preceding block run: `cell` its minimum cell (each index a
+        /// multiple of 4), the 64-bit cell mask in `id` (low half) and `flag` (high half);
+        /// cell `cell + (x, y, z)` is bit `16x + 4y + z`.
+        VOXEL_BLOCK = 10;
+    }
 }
 
 /// One map-delta record. Fields a tag does not use are ignored (write zeros);
@@ -85,18 +113,20 @@ pub struct WireDelta {
     pub cell: [i64; 3],
 }
 
-/// Map operations ([`MapRequestHeader::op`]).
-pub mod op {
-    /// Create an empty map with `bounds` and `sun`.
-    pub const CREATE: u32 = 1;
-    /// Apply the records as one atomic batch.
-    pub const APPLY: u32 = 2;
-    /// One chunk of a whole-map upload.
-    pub const UPLOAD: u32 = 3;
-    /// Page `chunk_index` of the map's content.
-    pub const SNAPSHOT: u32 = 4;
-    /// Delete the map.
-    pub const DELETE: u32 = 5;
+wire_codes! {
+    /// Map operations ([`MapRequestHeader::op`]).
+    op {
+        /// Create an empty map with `bounds` and `sun`.
+        CREATE = 1;
+        /// Apply the records as one atomic batch.
+        APPLY = 2;
+        /// One chunk of a whole-map upload.
+        UPLOAD = 3;
+        /// Page `chunk_index` of the map's content.
+        SNAPSHOT = 4;
+        /// Delete the map.
+        DELETE = 5;
+    }
 }
 
 /// [`MapRequestHeader::flags`] bit of an upload: replace an existing map.
@@ -276,7 +306,7 @@ impl MapRequest {
                 Ok(MapRequest::Apply {
                     map,
                     expected_version: version_of(h.expected_version),
-                    deltas: decode_deltas(records)?,
+                    deltas: decode_batch(records)?,
                 })
             }
             op::UPLOAD => {
@@ -334,7 +364,7 @@ impl MapRequest {
                 no_records("delete")?;
                 Ok(MapRequest::Delete { map, expected_version: version_of(h.expected_version) })
             }
-            other => Err(malformed(format!("op = {other} is not a map operation (1 create .. 5 delete)"))),
+            other => Err(malformed(format!("op = {other} is not a map operation ({})", op::range()))),
         }
     }
 
@@ -549,15 +579,39 @@ pub fn decode_deltas(records: &[WireDelta]) -> Result<Vec<MapDelta>, Rejection> 
             }
             tag::CLEAR => MapDelta::Clear,
             t => {
-                return Err(bad(format!(
-                    "record {i}: tag = {t} is not a delta (1 upsert cylinder .. 9 voxel block run)"
-                )));
+                return Err(bad(format!("record {i}: tag = {t} is not a delta record tag ({})", tag::range())));
             }
         };
         out.push(delta);
         i += 1;
     }
     Ok(out)
+}
+
+/// Decodes the records of a batch of changes (an apply request, a rendezvous
+/// request's inline deltas): [`decode_deltas`], and every voxel run or block run has
+/// at least one record. A run of none changes no cell, yet the first one would fix a
+/// map without voxels to its resolution and origin, so that a later run at another
+/// resolution is refused: that is never what a change means. (A whole map's content,
+/// an upload's chunks or a snapshot's pages, may carry one to describe a voxel grid
+/// with no cells.)
+pub fn decode_batch(records: &[WireDelta]) -> Result<Vec<MapDelta>, Rejection> {
+    let deltas = decode_deltas(records)?;
+    let empty = deltas.iter().position(|d| match d {
+        MapDelta::SetVoxels { cells, .. } => cells.is_empty(),
+        MapDelta::SetVoxelBlocks { blocks, .. } => blocks.is_empty(),
+        _ => false,
+    });
+    if let Some(i) = empty {
+        return Err(Rejection::at_delta(
+            Status::MalformedDelta,
+            format!(
+                "delta #{i}: a voxel run of 0 cells (or blocks) changes nothing, but would fix the map's voxel grid; send runs of at least one"
+            ),
+            i as u64,
+        ));
+    }
+    Ok(deltas)
 }
 
 /// A map's content (obstacles, then occupied voxels) as self-contained chunks of at
@@ -604,38 +658,94 @@ pub fn world_chunks_of(world: &World, max_records: usize) -> Vec<Vec<WireDelta>>
     chunks
 }
 
-/// The map with `bounds`, `sun` and the content `deltas` (upserts and voxel runs,
-/// as [`world_chunks`] makes), at `version`.
-pub fn world_from_content(
-    version: u64,
-    bounds: Bounds,
-    sun: Sun,
-    deltas: &[MapDelta],
-) -> Result<World, crate::world::MapDeltaError> {
-    // Merge consecutive voxel runs of one grid: applying them one by one would
-    // rebuild the grid once per chunk.
-    let mut merged: Vec<MapDelta> = Vec::with_capacity(deltas.len());
-    for d in deltas {
-        match (merged.last_mut(), d) {
-            (
-                Some(MapDelta::SetVoxels { resolution: r0, origin: o0, cells: c0, occupied: true }),
-                MapDelta::SetVoxels { resolution, origin, cells, occupied: true },
-            ) if r0.to_bits() == resolution.to_bits() && o0 == origin => {
-                c0.extend_from_slice(cells);
+/// The map with `bounds`, `sun` and the content `deltas` (obstacle upserts and
+/// occupied voxel runs, as [`world_chunks`] makes them, in any order), at `version`.
+///
+/// A map's content is a set of obstacles and occupied cells, so the order of its
+/// deltas does not matter (an id upserted twice keeps the later obstacle): every
+/// voxel run, whatever its place or kind, goes into one build of the grid, as
+/// applying runs one by one would rebuild it once per run. Other deltas (not made by
+/// [`world_chunks`]) are applied in their order, before the voxels. An error names
+/// the failing delta's index in `deltas`; for the cells together past a limit, the
+/// first voxel run's.
+pub fn world_from_content(version: u64, bounds: Bounds, sun: Sun, deltas: &[MapDelta]) -> Result<World, MapDeltaError> {
+    /// The voxel runs gathered, and the grid they name.
+    struct Grid {
+        first: usize,
+        resolution: f64,
+        origin: Point3<f64>,
+        cells: Option<Vec<CellIndex>>,
+        blocks: Option<Vec<VoxelBlock>>,
+    }
+    let at = |index: usize| move |kind: MapDeltaErrorKind| MapDeltaError { index, kind };
+    let mut rest: Vec<MapDelta> = Vec::new();
+    let mut rest_index: Vec<usize> = Vec::new();
+    let mut grid: Option<Grid> = None;
+    for (i, d) in deltas.iter().enumerate() {
+        let (resolution, origin) = match d {
+            MapDelta::SetVoxels { resolution, origin, occupied: true, .. }
+            | MapDelta::SetVoxelBlocks { resolution, origin, occupied: true, .. } => (*resolution, *origin),
+            other => {
+                rest.push(other.clone());
+                rest_index.push(i);
                 continue;
             }
-            (
-                Some(MapDelta::SetVoxelBlocks { resolution: r0, origin: o0, blocks: b0, occupied: true }),
-                MapDelta::SetVoxelBlocks { resolution, origin, blocks, occupied: true },
-            ) if r0.to_bits() == resolution.to_bits() && o0 == origin => {
-                b0.extend_from_slice(blocks);
-                continue;
+        };
+        let g = match &mut grid {
+            None => {
+                VoxelGrid::empty(resolution, origin).map_err(|e| at(i)(e.into()))?;
+                grid.insert(Grid { first: i, resolution, origin, cells: None, blocks: None })
             }
+            Some(g) if g.resolution == resolution && g.origin == origin => g,
+            Some(g) => {
+                return Err(at(i)(MapDeltaErrorKind::VoxelGridMismatch {
+                    have_resolution: g.resolution,
+                    have_origin: g.origin.coords.into(),
+                    resolution,
+                    origin: origin.coords.into(),
+                }));
+            }
+        };
+        match d {
+            MapDelta::SetVoxels { cells, .. } => g.cells.get_or_insert_with(Vec::new).extend_from_slice(cells),
+            MapDelta::SetVoxelBlocks { blocks, .. } => g.blocks.get_or_insert_with(Vec::new).extend_from_slice(blocks),
             _ => {}
         }
-        merged.push(d.clone());
     }
-    Ok(World::empty(bounds, sun).apply(&merged)?.at_version(version))
+    let world = World::empty(bounds, sun)
+        .apply(&rest)
+        .map_err(|e| MapDeltaError { index: rest_index.get(e.index).copied().unwrap_or(e.index), kind: e.kind })?;
+    let Some(g) = grid else { return Ok(world.at_version(version)) };
+    let (resolution, origin) = (g.resolution, g.origin);
+    let mut runs = Vec::new();
+    if let Some(cells) = g.cells {
+        runs.push(MapDelta::SetVoxels { resolution, origin, cells, occupied: true });
+    }
+    if let Some(blocks) = g.blocks {
+        runs.push(MapDelta::SetVoxelBlocks { resolution, origin, blocks, occupied: true });
+    }
+    let world = world
+        .apply(&runs)
+        .map_err(|e| MapDeltaError { index: run_at_fault(deltas, &e.kind).unwrap_or(g.first), kind: e.kind })?;
+    Ok(world.at_version(version))
+}
+
+/// The index of the first voxel run in `deltas` holding the cell or block a
+/// grid error names, if it names one.
+fn run_at_fault(deltas: &[MapDelta], kind: &MapDeltaErrorKind) -> Option<usize> {
+    let holds = |d: &MapDelta| match (kind, d) {
+        (MapDeltaErrorKind::Voxels(VoxelError::IndexOutOfRange { index }), MapDelta::SetVoxels { cells, .. }) => {
+            cells.contains(index)
+        }
+        (MapDeltaErrorKind::Voxels(VoxelError::IndexOutOfRange { index }), MapDelta::SetVoxelBlocks { blocks, .. }) => {
+            blocks.iter().any(|b| b.min == *index || b.cells().any(|c| c == *index))
+        }
+        (MapDeltaErrorKind::Voxels(VoxelError::MisalignedBlock { min }), MapDelta::SetVoxelBlocks { blocks, .. }) => {
+            blocks.iter().any(|b| b.min == *min)
+        }
+        _ => false,
+    };
+    deltas.iter().position(holds)
 }
 
 #[cfg(test)]
@@ -698,6 +808,98 @@ mod tests {
             assert_eq!(err.status, Status::MalformedDelta, "{records:?}");
             assert_eq!(err.index, Some(index), "{err}");
         }
+    }
+
+    #[test]
+    fn codes_are_consecutive_and_unknown_ones_are_told_the_real_range() {
+        for all in [tag::ALL, op::ALL] {
+            assert!(all.windows(2).all(|w| w[1].0 == w[0].0 + 1), "{all:?}");
+        }
+        assert_eq!(tag::ALL.last(), Some(&(tag::VOXEL_BLOCK, "VOXEL_BLOCK")));
+        let (last, _) = *tag::ALL.last().unwrap();
+        let err = decode_deltas(&[WireDelta { tag: last + 1, ..Default::default() }]).unwrap_err();
+        assert!(err.message.contains("1 (UPSERT_CYLINDER) ..= 10 (VOXEL_BLOCK)"), "{err}");
+        let h = MapRequestHeader { op: op::DELETE + 1, ..Default::default() };
+        let err = MapRequest::decode(&h, &[]).unwrap_err();
+        assert!(err.message.contains("1 (CREATE) ..= 5 (DELETE)"), "{err}");
+    }
+
+    #[test]
+    fn a_batch_refuses_voxel_runs_of_nothing_an_upload_takes_them() {
+        let empty =
+            |occupied| MapDelta::SetVoxels { resolution: 1.0, origin: Point3::origin(), cells: vec![], occupied };
+        let no_blocks =
+            MapDelta::SetVoxelBlocks { resolution: 1.0, origin: Point3::origin(), blocks: vec![], occupied: true };
+        for run in [empty(true), empty(false), no_blocks.clone()] {
+            let records = encode_deltas(&[MapDelta::Clear, run]);
+            assert_eq!(decode_deltas(&records).unwrap().len(), 2);
+            let err = decode_batch(&records).unwrap_err();
+            assert_eq!((err.status, err.index), (Status::MalformedDelta, Some(1)), "{err}");
+            let apply = MapRequest::Apply { map: 1, expected_version: None, deltas: vec![] }.header(1, [0, 0]);
+            assert_eq!(MapRequest::decode(&apply, &records).unwrap_err().status, Status::MalformedDelta);
+        }
+        // An upload's run of nothing describes a grid with no cells.
+        let up = MapRequest::Upload {
+            map: 1,
+            upload_id: 1,
+            chunk_index: 0,
+            chunk_count: 1,
+            replace: false,
+            expected_version: None,
+            bounds: Bounds::new([0.0, 0.0, 1.0, 1.0]).unwrap(),
+            sun: Sun::new(0.1, 0.0).unwrap(),
+            deltas: vec![no_blocks],
+        };
+        assert_eq!(MapRequest::decode(&up.header(1, [0, 0]), &up.records()).unwrap(), up);
+    }
+
+    #[test]
+    fn content_makes_the_same_map_in_any_order() {
+        let world = sample_world(MAX_DELTAS_PER_MESSAGE + 300, 40);
+        let grid = world.voxels().unwrap();
+        let mut deltas: Vec<MapDelta> =
+            world_chunks_of(&world, 64).iter().flat_map(|c| decode_deltas(c).unwrap()).collect();
+        // Obstacles last, block runs interleaved with upserts and with runs of single cells.
+        deltas.reverse();
+        let cells: Vec<CellIndex> = grid.cells().take(50).collect();
+        for (k, c) in cells.iter().enumerate() {
+            let run = MapDelta::SetVoxels {
+                resolution: grid.resolution(),
+                origin: grid.origin(),
+                cells: vec![*c],
+                occupied: true,
+            };
+            deltas.insert((k * 7) % deltas.len(), run);
+        }
+        let back = world_from_content(4, *world.bounds(), *world.sun(), &deltas).unwrap();
+        assert_eq!(back, world);
+
+        // Errors name the delta at fault in the content as given.
+        let at = |mut deltas: Vec<MapDelta>, i: usize, d: MapDelta| {
+            deltas.insert(i, d);
+            world_from_content(0, *world.bounds(), *world.sun(), &deltas).unwrap_err()
+        };
+        let other_grid =
+            MapDelta::SetVoxels { resolution: 0.5, origin: grid.origin(), cells: vec![[0, 0, 0]], occupied: true };
+        let e = at(deltas.clone(), 30, other_grid);
+        assert!(matches!(e.kind, MapDeltaErrorKind::VoxelGridMismatch { .. }) && e.index == 30, "{e}");
+        let far = MapDelta::SetVoxels {
+            resolution: grid.resolution(),
+            origin: grid.origin(),
+            cells: vec![[1 << 21, 0, 0]],
+            occupied: true,
+        };
+        let e = at(deltas.clone(), 40, far);
+        assert!(
+            matches!(e.kind, MapDeltaErrorKind::Voxels(VoxelError::IndexOutOfRange { .. })) && e.index == 40,
+            "{e}"
+        );
+        let bad_pole = MapDelta::UpsertObstacle {
+            id: 999,
+            obstacle: Obstacle::Cylinder(VerticalCylinder { center: Point2::new(0.0, 0.0), radius: 0.0, height: 1.0 }),
+        };
+        let e = at(deltas, 55, bad_pole);
+        assert!(matches!(e.kind, MapDeltaErrorKind::InvalidObstacle { id: 999, .. }) && e.index == 55, "{e}");
     }
 
     #[test]

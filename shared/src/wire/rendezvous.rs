@@ -31,7 +31,7 @@
 //! assert_eq!(RendezvousRequest::decode(&bad, &[]).unwrap_err().status.name(), "invalid_belief");
 //! ```
 
-use super::map::{MapId, WireDelta, decode_deltas, encode_deltas};
+use super::map::{MapId, WireDelta, decode_batch, encode_deltas};
 use super::{ANY_VERSION, Detail, Rejection, Status};
 use crate::answer::{Algorithm, Answer, EvalStats, StopReason};
 use crate::limits::{MAX_DEADLINE_MICROS, MAX_INLINE_DELTAS};
@@ -253,7 +253,8 @@ impl TryFrom<&WireParams> for Params {
             lambda: w.lambda,
             model,
         };
-        p.validate().map_err(|e| Rejection::new(Status::InvalidParams, format!("params.{e}")))?;
+        // A pair out of order names the field the request gave, not a default.
+        p.validate_given(given).map_err(|e| Rejection::new(Status::InvalidParams, format!("params.{e}")))?;
         Ok(p)
     }
 }
@@ -399,7 +400,7 @@ impl RendezvousRequest {
                 ),
             ));
         }
-        let deltas = decode_deltas(records)?;
+        let deltas = decode_batch(records)?;
         let request = RendezvousRequest {
             map: h.map_id,
             expected_version: (h.expected_version != ANY_VERSION).then_some(h.expected_version),
@@ -685,6 +686,42 @@ mod tests {
         for bad in [WireParams { set: 1 << 17, ..full }, WireParams { reserved: 1, ..full }] {
             assert_eq!(Params::try_from(&bad).unwrap_err().status, Status::InvalidParams);
         }
+    }
+
+    /// Regression: `z_min` = 9 given alone was reported as `z_max`, a field the
+    /// request never set.
+    #[test]
+    fn a_pair_out_of_order_names_the_field_the_request_gave() {
+        let only = |name: &str, v: f64| {
+            let mut w = WireParams { set: WireParams::bit(name).unwrap(), ..WireParams::default() };
+            match name {
+                "z_min" => w.z_min = v,
+                "z_max" => w.z_max = v,
+                "rho_min" => w.rho_min = v,
+                _ => w.rho_max = v,
+            }
+            Params::try_from(&w).unwrap_err().message
+        };
+        assert!(only("z_min", 9.0).starts_with("params.z_min = 9 must be < z_max = 8"), "{}", only("z_min", 9.0));
+        assert!(only("z_max", 0.2).starts_with("params.z_max = 0.2 must be > z_min = 0.5"), "{}", only("z_max", 0.2));
+        assert!(
+            only("rho_max", 0.5).starts_with("params.rho_max = 0.5 must be > rho_min = 1"),
+            "{}",
+            only("rho_max", 0.5)
+        );
+        assert!(
+            only("rho_min", 7.0).starts_with("params.rho_min = 7 must be < rho_max = 6"),
+            "{}",
+            only("rho_min", 7.0)
+        );
+        // Both given: the documented choice, as for a scenario file.
+        let both = WireParams {
+            z_min: 9.0,
+            z_max: 8.0,
+            set: WireParams::bit("z_min").unwrap() | WireParams::bit("z_max").unwrap(),
+            ..WireParams::default()
+        };
+        assert!(Params::try_from(&both).unwrap_err().message.starts_with("params.z_max"));
     }
 
     #[test]
