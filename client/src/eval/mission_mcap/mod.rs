@@ -9,7 +9,7 @@
 //! stamped with simulated time (log time = publish time = the message's stamp, in
 //! ns). The frames, on `/tf`: `map → rover` (true pose), `map → rover_estimate`
 //! (EKF mean), `map → viewer` and `viewer → camera` (the camera's mount and
-//! downward pitch).
+//! downward pitch, sent with each viewer pose).
 //!
 //! | topic | what it shows |
 //! |---|---|
@@ -552,14 +552,20 @@ impl McapMission {
         }
         let (position, yaw) = self.viewer_start;
         out.push((Topic::Tf, 0, Message::Transform { parent: "map", child: "viewer", position, yaw, pitch: 0.0 }));
-        let t_vs: [f64; 3] = self.params.t_vs.into();
-        let pitch = self.params.camera_pitch;
-        out.push((
-            Topic::Tf,
-            0,
-            Message::Transform { parent: "viewer", child: "camera", position: t_vs, yaw: 0.0, pitch },
-        ));
+        out.push((Topic::Tf, 0, self.camera_mount()));
         out.push((Topic::ViewerPose, 0, Message::Pose { position, yaw }));
+    }
+
+    /// `viewer → camera`: the camera's mount t_vs and its downward pitch.
+    fn camera_mount(&self) -> Message {
+        let t_vs: [f64; 3] = self.params.t_vs.into();
+        Message::Transform {
+            parent: "viewer",
+            child: "camera",
+            position: t_vs,
+            yaw: 0.0,
+            pitch: self.params.camera_pitch,
+        }
     }
 
     /// An arrow from the map's centre towards the sun.
@@ -660,6 +666,9 @@ impl McapMission {
                     ns,
                     Message::Transform { parent: "map", child: "viewer", position, yaw, pitch: 0.0 },
                 ));
+                // The mount again with each viewer pose: tf2 (RViz) looks a frame up at a
+                // marker's stamp, and a transform sent once answers for its own time only.
+                out.push((Topic::Tf, ns, self.camera_mount()));
                 out.push((Topic::ViewerPose, ns, Message::Pose { position, yaw }));
                 out.push((Topic::ViewerCamera, ns, Message::Scene(self.camera_scene(m, position, yaw))));
             }
@@ -774,6 +783,24 @@ mod tests {
         };
         assert_eq!(last.len(), 20);
         assert_eq!(last[19], (nanos(19.0 * 0.25), [1.9000000000000001, 0.0, 0.1]));
+        // The frustum (frame `camera`) has its frames at its own stamp, for tf2.
+        let frames_at = |ns: u64| {
+            let mut frames: Vec<&str> = messages
+                .iter()
+                .filter_map(|(t, at, m)| match m {
+                    Message::Transform { child, .. } if *t == Topic::Tf && *at == ns => Some(*child),
+                    _ => None,
+                })
+                .collect();
+            frames.sort();
+            frames
+        };
+        let cameras: Vec<u64> = messages.iter().filter(|(t, _, _)| *t == Topic::ViewerCamera).map(|m| m.1).collect();
+        assert_eq!(cameras.len(), 2);
+        for ns in cameras {
+            let frames = frames_at(ns);
+            assert!(frames.contains(&"camera") && frames.contains(&"viewer"), "at {ns} ns: {frames:?}");
+        }
         // Same record, same bytes, in both profiles.
         for profile in [McapProfile::Foxglove, McapProfile::Ros2] {
             assert_eq!(m.to_bytes(profile).unwrap(), m.clone().to_bytes(profile).unwrap());
