@@ -167,8 +167,8 @@ pub(crate) enum Message {
     Scene(Vec<Entity>),
     /// The a priori belief of one rendezvous.
     Request(RendezvousRecord),
-    /// The daemon's answer to one rendezvous.
-    Answer(AnswerRecord),
+    /// The daemon's answer to one rendezvous (boxed: the largest by far).
+    Answer(Box<AnswerRecord>),
     /// The viewer's measurement of one rendezvous, or why there is none.
     Measurement(Measurement),
     /// The absolute position error of one sample, m.
@@ -654,7 +654,7 @@ impl McapMission {
             out.push((Topic::Request, nanos(r.sim_time), Message::Request(*r)));
         }
         for a in &self.answers {
-            out.push((Topic::Answer, nanos(a.sim_time), Message::Answer(a.clone())));
+            out.push((Topic::Answer, nanos(a.sim_time), Message::Answer(Box::new(a.clone()))));
         }
         for m in &self.trace.measurements {
             let ns = nanos(m.sim_time);
@@ -884,6 +884,6 @@ mod tests {
         let messages = m.messages();
         let (_, ns, a) = messages.iter().find(|(t, _, _)| *t == Topic::Answer).unwrap();
         assert_eq!(*ns, 500_000_000);
-        assert_eq!(a, &Message::Answer(answer));
+        assert_eq!(a, &Message::Answer(Box::new(answer)));
     }
 }
