@@ -216,10 +216,13 @@ fn demo_prints_the_ape_table_and_draws_each_run() {
         let bytes = std::fs::read(out_dir.join(format!("mission-{arm}-s1.mcap"))).unwrap();
         let file = mcap::Summary::read(&bytes).unwrap().expect("a summary");
         let stats = file.stats.expect("statistics");
-        let count = |topic: &str| {
-            let (id, _) = file.channels.iter().find(|(_, c)| c.topic == topic).unwrap_or_else(|| panic!("{topic}"));
-            stats.channel_message_counts.get(id).copied().unwrap_or(0)
-        };
+        let messages = |id: &u16| stats.channel_message_counts.get(id).copied().unwrap_or(0);
+        // Only channels that carry messages are declared (a run without a viewer has no camera).
+        for (id, c) in &file.channels {
+            assert!(messages(id) > 0, "{arm}: {} is declared without a message", c.topic);
+        }
+        let count =
+            |topic: &str| file.channels.iter().find(|(_, c)| c.topic == topic).map_or(0, |(id, _)| messages(id));
         let rendezvous = if *arm == "dead-reckoning" { 0 } else { small_mission().waypoints.len() as u64 };
         assert_eq!(count("/dyfos/rendezvous/answer"), rendezvous, "{arm}");
         assert_eq!(count("/dyfos/rendezvous/request"), rendezvous, "{arm}");

@@ -1,12 +1,14 @@
-//! Missions as MCAP files for Foxglove (`dyfos-rover --mcap`, `dyfos-viewer
-//! --mcap`; the demo's files are checked in `mission.rs`): read back with the
-//! `mcap` crate's reader, every channel has its schema and encoding, every message
-//! has exactly the fields its schema declares, and what the files say — poses,
+//! Missions as MCAP files (`dyfos-rover --mcap`, `dyfos-viewer --mcap`; the demo's
+//! files are checked in `mission.rs`, and decoded by an independent ROS 2 reader
+//! in `tests/ros2_mcap/`): read back with the `mcap` crate's reader, every channel
+//! has its schema and encoding and carries messages, every Foxglove message has
+//! exactly the fields its schema declares, and what the files say — poses,
 //! rendezvous beliefs, answers, measurements, APE — is what the mission's event
-//! logs and the evaluation's trace say.
+//! logs and the evaluation's trace say. In the ROS 2 profile, every schema is the
+//! full rosbag2 definition of its type and the messages are where they belong.
 
-use dyfos_client::eval::MissionTrace;
 use dyfos_client::eval::foxglove::CHANNELS;
+use dyfos_client::eval::{MissionTrace, ros2};
 use dyfos_shared::wire::mission::Observation;
 use dyfos_tests::Sandbox;
 use dyfos_tests::mission::{MissionFiles, record_until_exit, small_mission, steps_of};
@@ -20,27 +22,44 @@ struct Read {
     data: Value,
 }
 
-/// Reads `path` with the crate's reader: checks the summary (every channel of
-/// [`CHANNELS`], JSON messages, JSON-schema schemas), every message against the
-/// schema stored in the file, log times against the `timestamp` fields, and
-/// returns the messages by topic.
+/// Checks the summary of a mission file: its profile, the message and schema
+/// encoding and the schema name of each channel (one of `channels`), and that
+/// every declared channel carries messages. Returns the declared topics.
+fn check_summary(bytes: &[u8], profile: &str, encodings: (&str, &str), channels: &[(&str, &str)]) -> Vec<String> {
+    let header = mcap::read::LinearReader::new(bytes)
+        .expect("an MCAP file")
+        .find_map(|r| match r.expect("a record") {
+            mcap::records::Record::Header(h) => Some(h),
+            _ => None,
+        })
+        .expect("a header");
+    assert_eq!(header.profile, profile);
+    let summary = mcap::Summary::read(bytes).expect("a readable summary").expect("a summary section");
+    let stats = summary.stats.as_ref().expect("statistics");
+    let mut topics = Vec::new();
+    for c in summary.channels.values() {
+        assert_eq!(c.message_encoding, encodings.0, "{}", c.topic);
+        let schema = c.schema.as_ref().unwrap_or_else(|| panic!("{} has no schema", c.topic));
+        assert_eq!(schema.encoding, encodings.1, "{}", c.topic);
+        let expected = channels.iter().find(|(t, _)| *t == c.topic).unwrap_or_else(|| panic!("unknown {}", c.topic));
+        assert_eq!(schema.name, expected.1, "{}", c.topic);
+        let count = stats.channel_message_counts.get(&c.id).copied().unwrap_or(0);
+        assert!(count > 0, "{} is declared without a message", c.topic);
+        topics.push(c.topic.clone());
+    }
+    topics.sort();
+    topics
+}
+
+/// Reads `path` with the crate's reader: checks the summary (Foxglove's profile,
+/// JSON messages, JSON-schema schemas, no channel without messages), every message
+/// against the schema stored in the file, log times against the `timestamp`
+/// fields, and returns the messages by topic (every topic of [`CHANNELS`], empty
+/// where the file has none).
 fn read_mission(path: &Path) -> BTreeMap<String, Vec<Read>> {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let summary = mcap::Summary::read(&bytes).expect("a readable summary").expect("a summary section");
-    let mut channels: Vec<(String, String)> = summary
-        .channels
-        .values()
-        .map(|c| {
-            assert_eq!(c.message_encoding, "json", "{}", c.topic);
-            let schema = c.schema.as_ref().unwrap_or_else(|| panic!("{} has no schema", c.topic));
-            assert_eq!(schema.encoding, "jsonschema", "{}", c.topic);
-            (c.topic.clone(), schema.name.clone())
-        })
-        .collect();
-    channels.sort();
-    let mut expected: Vec<(String, String)> = CHANNELS.iter().map(|(t, s)| (t.to_string(), s.to_string())).collect();
-    expected.sort();
-    assert_eq!(channels, expected);
+    check_summary(&bytes, "", ("json", "jsonschema"), &CHANNELS);
 
     let mut by_topic: BTreeMap<String, Vec<Read>> = CHANNELS.iter().map(|(t, _)| (t.to_string(), Vec::new())).collect();
     let mut last = 0;
@@ -253,6 +272,82 @@ fn rover_and_viewer_write_missions_that_match_their_event_logs() {
     assert_eq!(ours, theirs);
     let observed = trace.measurements.iter().filter(|m| matches!(m.observation, Observation::Observed { .. })).count();
     assert_eq!(observed, n);
+    assert!(topics["/rover/pose"].is_empty(), "the viewer does not record the truth");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Reads a ROS 2-profile file: checks the summary (profile `ros2`, CDR messages,
+/// `ros2msg` schemas holding the full rosbag2 definition of their type, no channel
+/// without messages), each message's encapsulation header, and the stamp of every
+/// message that starts with a `std_msgs/Header` against its log time. Returns the
+/// messages' log times by topic (every topic, empty where the file has none).
+fn read_ros2(path: &Path) -> BTreeMap<String, Vec<u64>> {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    check_summary(&bytes, "ros2", ("cdr", "ros2msg"), &ros2::CHANNELS);
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    for c in summary.channels.values() {
+        let schema = c.schema.as_ref().unwrap();
+        let text = ros2::definitions::full_text(&schema.name).unwrap();
+        assert_eq!(std::str::from_utf8(&schema.data).unwrap(), text, "{}", c.topic);
+    }
+    let mut by_topic: BTreeMap<String, Vec<u64>> =
+        ros2::CHANNELS.iter().map(|(t, _)| (t.to_string(), Vec::new())).collect();
+    let mut last = 0;
+    for message in mcap::MessageStream::new(&bytes).expect("a readable file") {
+        let message = message.expect("a readable message");
+        let topic = message.channel.topic.clone();
+        assert_eq!(message.data[..4], [0, 1, 0, 0], "{topic}: CDR, little-endian");
+        assert!(message.log_time >= last && message.publish_time == message.log_time, "{topic}");
+        last = message.log_time;
+        // TFMessage and MarkerArray start with a sequence; every other type with its header.
+        if !matches!(topic.as_str(), "/tf" | "/map" | "/rover/estimate/covariance" | "/viewer/camera") {
+            let word = |k: usize| u32::from_le_bytes(message.data[4 + 4 * k..8 + 4 * k].try_into().unwrap());
+            let stamp = u64::from(word(0)) * 1_000_000_000 + u64::from(word(1));
+            assert_eq!(stamp, message.log_time, "{topic}: the header's stamp is the log time");
+        }
+        by_topic.entry(topic).or_default().push(message.log_time);
+    }
+    by_topic
+}
+
+#[test]
+fn rover_and_viewer_write_ros2_bags_on_request() {
+    let sandbox = Sandbox::new("mission-ros2");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mission = small_mission();
+    let files = MissionFiles::new(&sandbox, &mission);
+    let dir = sandbox.state_dir.with_extension("mcap");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (rover_file, viewer_file) = (dir.join("rover.mcap"), dir.join("viewer.mcap"));
+    let ros2 = |file: &Path| ["--mcap".to_string(), file.display().to_string(), "--mcap-profile".into(), "ros2".into()];
+    let (rover_args, viewer_args) = (ros2(&rover_file), ros2(&viewer_file));
+    let recorder = files.recorder("m");
+    let mut viewer = files.viewer("m", "dyfos", 7, &viewer_args.each_ref().map(String::as_str));
+    let mut rover = files.rover("m", 7, "0", &rover_args.each_ref().map(String::as_str));
+    let (status, trace) = record_until_exit(recorder, &mut rover);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    let n = mission.waypoints.len();
+
+    let topics = read_ros2(&rover_file);
+    let mut truth: Vec<u64> = trace.truth.iter().map(|t| ns(t.sim_time)).collect();
+    truth.sort();
+    assert_eq!(topics["/rover/pose"], truth);
+    assert_eq!(topics["/rover/estimate/pose"].len(), trace.estimates.len());
+    assert_eq!(topics["/dyfos/ape"].len(), trace.errors().len());
+    let rover_events = rover.events();
+    let sent = steps_of(&rover_events, "rendezvous_sent");
+    let times: Vec<u64> = sent.iter().map(|(_, e)| ns(e["sim_time"].as_f64().unwrap())).collect();
+    assert_eq!(topics["/dyfos/rendezvous/request"], times);
+    assert_eq!(topics["/dyfos/rendezvous/measurement"].len(), n);
+    assert!(topics["/dyfos/rendezvous/answer"].is_empty());
+
+    let topics = read_ros2(&viewer_file);
+    let events = viewer.events();
+    assert_eq!(topics["/dyfos/rendezvous/request"].len(), steps_of(&events, "rendezvous_received").len());
+    assert_eq!(topics["/dyfos/rendezvous/answer"].len(), n);
+    assert_eq!(topics["/viewer/pose"].len(), n + 1, "take-off and each rendezvous");
+    assert_eq!(topics["/viewer/camera"].len(), n);
     assert!(topics["/rover/pose"].is_empty(), "the viewer does not record the truth");
     let _ = std::fs::remove_dir_all(&dir);
 }

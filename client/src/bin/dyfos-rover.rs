@@ -6,6 +6,7 @@
 
 use anyhow::Context;
 use clap::Parser;
+use dyfos_client::eval::McapProfile;
 use dyfos_client::mission::Mission;
 use dyfos_client::rover::{RoverConfig, run_rover};
 use dyfos_client::shutdown;
@@ -48,6 +49,10 @@ struct Cli {
     /// Write the mission as an MCAP file here at exit (its true and estimated poses, rendezvous, measurements and APE), for Foxglove.
     #[arg(long)]
     mcap: Option<PathBuf>,
+    /// Encoding of the --mcap file: `foxglove` (JSON with Foxglove's schemas) or `ros2`
+    /// (CDR with ROS 2 message definitions, as rosbag2 writes: `ros2 bag play`, RViz).
+    #[arg(long, value_enum, default_value_t = McapProfile::Foxglove)]
+    mcap_profile: McapProfile,
 }
 
 fn seconds(name: &str, v: f64) -> anyhow::Result<Duration> {
@@ -68,6 +73,7 @@ fn config(cli: &Cli) -> anyhow::Result<RoverConfig> {
         dead_reckoning: cli.dead_reckoning,
         events: cli.events.clone(),
         mcap: cli.mcap.clone(),
+        mcap_profile: cli.mcap_profile,
         ..RoverConfig::new(topics, mission, cli.seed)
     })
 }

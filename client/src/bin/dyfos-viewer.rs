@@ -8,6 +8,7 @@
 use anyhow::Context;
 use clap::Parser;
 use dyfos_client::ClientConfig;
+use dyfos_client::eval::McapProfile;
 use dyfos_client::mission::Mission;
 use dyfos_client::shutdown;
 use dyfos_client::viewer::{ViewerConfig, run_viewer};
@@ -68,6 +69,10 @@ struct Cli {
     /// Write the mission as an MCAP file here at exit (the rendezvous beliefs, the daemon's answers, its measurements and poses), for Foxglove.
     #[arg(long)]
     mcap: Option<PathBuf>,
+    /// Encoding of the --mcap file: `foxglove` (JSON with Foxglove's schemas) or `ros2`
+    /// (CDR with ROS 2 message definitions, as rosbag2 writes: `ros2 bag play`, RViz).
+    #[arg(long, value_enum, default_value_t = McapProfile::Foxglove)]
+    mcap_profile: McapProfile,
     /// Model file of the learned SDSMM (from `dyfos train`), for missions with
     /// `"model": "learned"`; give dyfosd the same file.
     #[arg(long)]
@@ -120,6 +125,7 @@ fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
         rover_timeout: seconds("rover-timeout", cli.rover_timeout)?,
         events: cli.events.clone(),
         mcap: cli.mcap.clone(),
+        mcap_profile: cli.mcap_profile,
         ..ViewerConfig::new(client, topics, mission, cli.algo, cli.seed)
     })
 }

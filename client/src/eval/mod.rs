@@ -1,7 +1,8 @@
 //! Evaluation of a mission: record the ground truth and the rover's estimate from
 //! their topics, compute the absolute position error (APE, paper Table I) and draw
-//! the run (paper Fig. 5); keep it as an MCAP file Foxglove opens as is
-//! ([`McapMission`], module [`foxglove`]).
+//! the run (paper Fig. 5); keep it as an MCAP file that Foxglove opens as is or
+//! that ROS 2 plays as a bag ([`McapMission`], [`McapProfile`]; modules
+//! [`foxglove`] and [`ros2`]).
 //!
 //! The APE is taken over every recorded sample — the estimate and the truth with
 //! the same sample number, i.e. the same instant — as `|est_xy − true_xy|`, like
@@ -19,10 +20,12 @@
 //! ```
 
 pub mod foxglove;
+pub mod mission_mcap;
 mod recorder;
+pub mod ros2;
 mod svg;
 
-pub use foxglove::{AnswerRecord, McapMission, McapWriteError};
+pub use mission_mcap::{AnswerRecord, McapMission, McapProfile, McapWriteError};
 pub use recorder::{MissionTrace, Recorder};
 pub use svg::render_svg;
 

@@ -1,7 +1,8 @@
 //! A picture of one mission in the style of paper Fig. 5: the obstacles, the true
 //! path (dashed), the estimated path coloured by its error, the viewer's poses with
 //! their lines of sight, the measurement covariances R and the rover's posterior
-//! covariance after each update (both as 2σ ellipses).
+//! covariance after each update (both as 2σ ellipses), over x and y axes with
+//! ticks and a grid in metres.
 
 use super::MissionTrace;
 use dyfos_shared::wire::mission::Observation;
@@ -12,6 +13,14 @@ const WIDTH: f64 = 720.0;
 const MARGIN: f64 = 20.0;
 const BAR: f64 = 170.0;
 const TITLE: f64 = 34.0;
+/// Room left of the map for the y ticks' labels and the axis name.
+const LEFT: f64 = 58.0;
+/// Room below the map for the x ticks' labels and the axis name.
+const BOTTOM: f64 = 46.0;
+/// Length of a tick mark, outside the map.
+const TICK: f64 = 5.0;
+/// Most intervals between ticks along an axis.
+const MAX_TICKS: f64 = 10.0;
 
 /// Viridis, sampled at 0, ¼, ½, ¾, 1.
 const VIRIDIS: [[f64; 3]; 5] =
@@ -33,11 +42,67 @@ struct Frame {
 
 impl Frame {
     fn x(&self, x: f64) -> f64 {
-        MARGIN + (x - self.x0) * self.scale
+        LEFT + (x - self.x0) * self.scale
     }
     fn y(&self, y: f64) -> f64 {
         TITLE + MARGIN + (self.y1 - y) * self.scale
     }
+}
+
+/// A round distance between ticks — 1, 2 or 5 × 10ᵏ m — giving at most
+/// [`MAX_TICKS`] intervals over `span` m.
+fn tick_step(span: f64) -> f64 {
+    let raw = span / MAX_TICKS;
+    let power = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 5.0].into_iter().map(|m| m * power).find(|s| *s >= raw * (1.0 - 1e-9)).unwrap_or(10.0 * power)
+}
+
+/// The multiples of `step` within [`lo`, `hi`], labelled with the decimals the step needs.
+fn ticks(lo: f64, hi: f64, step: f64) -> Vec<(f64, String)> {
+    let decimals = (-step.log10().floor()).max(0.0) as usize;
+    let (first, last) = ((lo / step - 1e-9).ceil() as i64, (hi / step + 1e-9).floor() as i64);
+    (first..=last)
+        .map(|k| {
+            let v = k as f64 * step;
+            // No "-0" label.
+            let label = format!("{:.*}", decimals, if k == 0 { 0.0 } else { v });
+            (v, label)
+        })
+        .collect()
+}
+
+/// The grid, the ticks and their labels along the map's bottom and left edges,
+/// and the axes' names.
+fn axes(s: &mut String, f: &Frame, b: &dyfos_shared::world::Bounds) {
+    let step = tick_step((b.max.x - b.min.x).max(b.max.y - b.min.y));
+    let (left, right, top, bottom) = (f.x(b.min.x), f.x(b.max.x), f.y(b.max.y), f.y(b.min.y));
+    for (x, label) in ticks(b.min.x, b.max.x, step) {
+        let px = f.x(x);
+        let _ = writeln!(
+            s,
+            r##"<line x1="{px:.2}" y1="{top:.2}" x2="{px:.2}" y2="{bottom:.2}" stroke="#ececec"/><line x1="{px:.2}" y1="{bottom:.2}" x2="{px:.2}" y2="{:.2}" stroke="#555"/><text class="xtick" x="{px:.2}" y="{:.2}" text-anchor="middle" fill="#333">{label}</text>"##,
+            bottom + TICK,
+            bottom + TICK + 13.0
+        );
+    }
+    for (y, label) in ticks(b.min.y, b.max.y, step) {
+        let py = f.y(y);
+        let _ = writeln!(
+            s,
+            r##"<line x1="{left:.2}" y1="{py:.2}" x2="{right:.2}" y2="{py:.2}" stroke="#ececec"/><line x1="{:.2}" y1="{py:.2}" x2="{left:.2}" y2="{py:.2}" stroke="#555"/><text class="ytick" x="{:.2}" y="{:.2}" text-anchor="end" fill="#333">{label}</text>"##,
+            left - TICK,
+            left - TICK - 3.0,
+            py + 4.0
+        );
+    }
+    let _ = writeln!(
+        s,
+        r##"<text x="{:.2}" y="{:.2}" text-anchor="middle" fill="#333">x (m)</text><text x="16" y="{:.2}" text-anchor="middle" fill="#333" transform="rotate(-90 16 {:.2})">y (m)</text>"##,
+        (left + right) / 2.0,
+        bottom + TICK + 32.0,
+        (top + bottom) / 2.0,
+        (top + bottom) / 2.0
+    );
 }
 
 /// The 2σ ellipse of a 2×2 covariance `[[a, b], [b, c]]` at (x, y), as SVG.
@@ -63,9 +128,9 @@ fn ellipse(f: &Frame, x: f64, y: f64, cov: [[f64; 2]; 2], style: &str) -> String
 /// document headed by `title`.
 pub fn render_svg(world: &World, waypoints: &[[f64; 2]], trace: &MissionTrace, title: &str) -> String {
     let b = world.bounds();
-    let scale = (WIDTH - 2.0 * MARGIN) / (b.max.x - b.min.x);
+    let scale = (WIDTH - LEFT - MARGIN) / (b.max.x - b.min.x);
     let f = Frame { x0: b.min.x, y1: b.max.y, scale };
-    let height = TITLE + 2.0 * MARGIN + (b.max.y - b.min.y) * scale;
+    let height = TITLE + MARGIN + (b.max.y - b.min.y) * scale + BOTTOM;
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -75,6 +140,7 @@ pub fn render_svg(world: &World, waypoints: &[[f64; 2]], trace: &MissionTrace, t
     );
     let _ = writeln!(s, r#"<rect width="100%" height="100%" fill="white"/>"#);
     let _ = writeln!(s, r#"<text x="{MARGIN}" y="22" font-size="16">{}</text>"#, escape(title));
+    axes(&mut s, &f, b);
     let _ = writeln!(
         s,
         r##"<rect x="{:.2}" y="{:.2}" width="{:.2}" height="{:.2}" fill="none" stroke="#888"/>"##,
@@ -295,5 +361,43 @@ mod tests {
         assert_eq!(svg.matches("<ellipse").count(), 2, "R and Σ⁺");
         assert_eq!(svg.matches("<polygon").count(), 1);
         assert!(svg.contains("test &lt;run&gt;"));
+    }
+
+    /// The value and position of each tick label of class `class`.
+    fn labels(svg: &str, class: &str, position: &str) -> Vec<(f64, f64)> {
+        svg.split(&format!(r#"<text class="{class}" "#))
+            .skip(1)
+            .map(|rest| {
+                let at = rest.split(&format!(r#"{position}=""#)).nth(1).unwrap().split('"').next().unwrap();
+                let value = rest.split('>').nth(1).unwrap().split('<').next().unwrap();
+                (value.parse().unwrap(), at.parse().unwrap())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn axes_are_ticked_in_metres_where_the_map_is() {
+        let m = Mission::builtin();
+        let svg = render_svg(&m.world, &m.waypoints, &MissionTrace::default(), "axes");
+        let b = m.world.bounds();
+        let scale = (WIDTH - LEFT - MARGIN) / (b.max.x - b.min.x);
+        let f = Frame { x0: b.min.x, y1: b.max.y, scale };
+        // The built-in world spans 20 m: a tick every 2 m, from edge to edge.
+        let expected: Vec<f64> = (-5..=5).map(|k| 2.0 * k as f64).collect();
+        for (class, position) in [("xtick", "x"), ("ytick", "y")] {
+            let ticks = labels(&svg, class, position);
+            assert_eq!(ticks.iter().map(|t| t.0).collect::<Vec<_>>(), expected, "{class}");
+            for (metres, at) in ticks {
+                // A label sits at its own coordinate (y labels 4 px below, to centre the text).
+                let want = if class == "xtick" { f.x(metres) } else { f.y(metres) + 4.0 };
+                assert!((at - want).abs() < 0.01, "{class} {metres} m at {at}, not {want}");
+            }
+        }
+        assert!(svg.contains(">x (m)</text>") && svg.contains(">y (m)</text>"));
+        // Steps are round and labels carry the decimals they need.
+        assert_eq!(tick_step(16.0), 2.0);
+        assert_eq!(tick_step(3.0), 0.5);
+        assert_eq!(tick_step(100.0), 10.0);
+        assert_eq!(ticks(-0.6, 0.6, 0.5).into_iter().map(|t| t.1).collect::<Vec<_>>(), ["-0.5", "0.0", "0.5"]);
     }
 }

@@ -46,7 +46,7 @@
 pub mod controller;
 pub mod ekf;
 
-use crate::eval::{McapMission, McapWriteError};
+use crate::eval::{McapMission, McapProfile, McapWriteError};
 use crate::mission::Mission;
 use crate::mission::log::EventLog;
 use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
@@ -95,6 +95,8 @@ pub struct RoverConfig {
     /// MCAP file of the mission as the rover knows it, written at exit (also after
     /// a failure, with what was recorded).
     pub mcap: Option<PathBuf>,
+    /// Encoding of [`RoverConfig::mcap`]: Foxglove's JSON (default) or ROS 2's CDR.
+    pub mcap_profile: McapProfile,
     /// At the goal, how long to wait for the evaluation (estimate readers, if any)
     /// to acknowledge the last sample before exiting, wall time.
     pub linger: Duration,
@@ -117,6 +119,7 @@ impl RoverConfig {
             sample_every: 5,
             events: None,
             mcap: None,
+            mcap_profile: McapProfile::Foxglove,
             linger: Duration::from_secs(5),
         }
     }
@@ -352,7 +355,7 @@ fn true_start(mission: &Mission, seed: u64) -> [f64; 3] {
 /// Runs the mission to the goal, then writes [`RoverConfig::mcap`] if asked for.
 /// `stop` is polled (e.g. [`crate::shutdown::requested`]).
 pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<RoverReport, RoverRunError> {
-    McapMission::around(config.mcap.as_deref(), &config.mission, |mcap| drive(config, stop, mcap))
+    McapMission::around(config.mcap.as_deref(), config.mcap_profile, &config.mission, |mcap| drive(config, stop, mcap))
 }
 
 fn drive(

@@ -42,7 +42,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use crate::eval::{AnswerRecord, McapMission, McapWriteError};
+use crate::eval::{AnswerRecord, McapMission, McapProfile, McapWriteError};
 use crate::mission::Mission;
 use crate::mission::log::EventLog;
 use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
@@ -103,6 +103,8 @@ pub struct ViewerConfig {
     /// MCAP file of the viewer's side of the mission, written at exit (also after
     /// a failure, with what was recorded).
     pub mcap: Option<PathBuf>,
+    /// Encoding of [`ViewerConfig::mcap`]: Foxglove's JSON (default) or ROS 2's CDR.
+    pub mcap_profile: McapProfile,
     /// Weights of the `learned` SDSMM, for missions whose `params.model` is
     /// `learned` (the camera's noise; `dyfosd` needs the same file, its `--model`).
     pub learned: Option<Arc<Learned>>,
@@ -130,6 +132,7 @@ impl ViewerConfig {
             rover_timeout: Duration::from_secs(20),
             events: None,
             mcap: None,
+            mcap_profile: McapProfile::Foxglove,
             learned: None,
         }
     }
@@ -391,7 +394,7 @@ impl Viewer<'_> {
 /// Runs until the rover finishes (or goes quiet for `idle_timeout`); then writes
 /// [`ViewerConfig::mcap`], if asked for.
 pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<ViewerReport, ViewerRunError> {
-    McapMission::around(config.mcap.as_deref(), &config.mission, |mcap| serve(config, stop, mcap))
+    McapMission::around(config.mcap.as_deref(), config.mcap_profile, &config.mission, |mcap| serve(config, stop, mcap))
 }
 
 fn serve(

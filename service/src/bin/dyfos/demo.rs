@@ -6,8 +6,9 @@
 //! as the baseline. This process listens to the simulation's ground truth and the
 //! rover's estimate, prints the APE table of paper Table I and writes one SVG per
 //! algorithm in the style of paper Fig. 5, and one MCAP file per run for Foxglove
-//! (the recorded truth and estimates, plus the viewer's requests and the daemon's
-//! answers from its event log; see [`dyfos_client::eval::foxglove`]). Every child is
+//! or ROS 2 (`--mcap-profile`; the recorded truth and estimates, plus the viewer's
+//! requests and the daemon's answers from its event log; see
+//! [`dyfos_client::eval::mission_mcap`]). Every child is
 //! stopped on exit, on error and on Ctrl-C.
 //!
 //! With `--hosts 2` each algorithm's rover runs on a second "host" (a network
@@ -18,7 +19,7 @@
 use crate::Failure;
 use crate::hosts::{ROVER_ENDPOINT, TwoHosts};
 use anyhow::{Context, anyhow, bail};
-use dyfos_client::eval::{ApeStats, McapMission, MissionTrace, Recorder, mean_std, render_svg};
+use dyfos_client::eval::{ApeStats, McapMission, McapProfile, MissionTrace, Recorder, mean_std, render_svg};
 use dyfos_client::mission::Mission;
 use dyfos_client::mission::log::read_events;
 use dyfos_client::mission::topics::TopicsConfig;
@@ -53,6 +54,10 @@ pub struct DemoArgs {
     /// Directory for the SVGs, the MCAP files (one per run), a JSON summary and the processes' logs.
     #[arg(long, default_value = "dyfos-demo")]
     pub out: PathBuf,
+    /// Encodings of the MCAP files, comma-separated: `foxglove` (mission-<run>.mcap,
+    /// JSON for Foxglove) and/or `ros2` (mission-<run>-ros2.mcap, CDR as rosbag2 writes it).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "foxglove")]
+    pub mcap_profile: Vec<McapProfile>,
     /// Skip the dead-reckoning baseline (a rover without a viewer).
     #[arg(long)]
     pub no_baseline: bool,
@@ -323,7 +328,9 @@ impl Demo<'_> {
             let events = read_events(&log).with_context(|| format!("cannot read {}", log.display()))?;
             mcap.record_viewer_events(&events);
         }
-        mcap.write(&self.args.out.join(format!("mission-{name}.mcap")))?;
+        for profile in profiles(&self.args.mcap_profile) {
+            mcap.write(&self.args.out.join(mcap_file(&name, profile)), profile)?;
+        }
         let observed =
             trace.measurements.iter().filter(|m| matches!(m.observation, Observation::Observed { .. })).count();
         eprintln!(
@@ -522,14 +529,34 @@ fn run(args: &DemoArgs) -> Result<(), Failure> {
     let summary = args.out.join("summary.json");
     std::fs::write(&summary, serde_json::to_string_pretty(&summary_json(&results))?)
         .with_context(|| format!("cannot write {}", summary.display()))?;
+    let mcaps: Vec<String> = profiles(&args.mcap_profile)
+        .into_iter()
+        .map(|p| format!("{} {}/{}", p.name(), args.out.display(), mcap_file("<algorithm>-s<seed>", p)))
+        .collect();
     println!(
-        "\nSVGs (paper Fig. 5 style): {}/mission-<algorithm>.svg; Foxglove: {}/mission-<algorithm>-s<seed>.mcap; summary: {}; took {:.0} s",
+        "\nSVGs (paper Fig. 5 style): {}/mission-<algorithm>.svg; MCAP: {}; summary: {}; took {:.0} s",
         args.out.display(),
-        args.out.display(),
+        mcaps.join(", "),
         summary.display(),
         started.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// The profiles asked for, each once.
+fn profiles(asked: &[McapProfile]) -> Vec<McapProfile> {
+    let mut profiles = asked.to_vec();
+    profiles.sort();
+    profiles.dedup();
+    profiles
+}
+
+/// The MCAP file of run `name` in `profile`.
+fn mcap_file(name: &str, profile: McapProfile) -> String {
+    match profile {
+        McapProfile::Foxglove => format!("mission-{name}.mcap"),
+        McapProfile::Ros2 => format!("mission-{name}-ros2.mcap"),
+    }
 }
 
 /// Removes a directory tree when dropped.

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# The ROS 2 profile of the mission MCAP files, decoded by an independent reader:
+# runs `dyfos demo --mcap-profile foxglove,ros2` (the workspace's debug build) and
+# checks with Foxglove's `mcap-ros2-support` that each ROS 2 file says what its
+# Foxglove twin says (test_ros2_mcap.py).
+#
+#   tests/ros2_mcap/run.sh [pytest args...]
+#
+# Needs Python >= 3.9 with venv; installs pytest, mcap and mcap-ros2-support (pure
+# Python wheels, about 1 MB) into a venv under the cargo target dir the first time.
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+root="$(cd "$here/../.." && pwd)"
+target="${CARGO_TARGET_DIR:-$root/target}"
+venv="$target/ros2-mcap-venv"
+python="${PYTHON:-python3}"
+
+if [ ! -x "$venv/bin/python" ]; then
+    "$python" -m venv "$venv"
+fi
+if ! "$venv/bin/python" -c "import pytest, mcap, mcap_ros2" 2>/dev/null; then
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
+        "pytest>=7" "mcap>=1.1,<2" "mcap-ros2-support>=0.5,<1"
+fi
+
+# The demo and the processes it starts (a no-op after scripts/test's build).
+(cd "$root" && cargo build --quiet --workspace --all-targets)
+
+# No __pycache__ in the source tree.
+export PYTHONDONTWRITEBYTECODE=1
+export DYFOS="$target/debug/dyfos" DYFOS_TEST_DATA="$root/tests/data"
+status=0
+(cd "$here" && "$venv/bin/python" -m pytest -q -p no:cacheprovider "$@") || status=$?
+if [ "$status" -eq 5 ]; then
+    echo "tests/ros2_mcap/run.sh: pytest collected no tests" >&2
+    exit 1
+fi
+exit "$status"
