@@ -6,7 +6,8 @@
 //! each type once.
 //!
 //! The `.msg` files in `msg/` are ROS 2 jazzy's own, byte for byte (see
-//! `msg/README.md`); `msg/dyfos_msgs/` holds dyfos's.
+//! `msg/README.md`); dyfos's own are those of the `dyfos_msgs` package
+//! (`ros/dyfos_msgs/msg/`), so the file's schemas and the installed package agree.
 
 use std::collections::{BTreeSet, HashSet};
 
@@ -14,9 +15,9 @@ use std::collections::{BTreeSet, HashSet};
 const MSGS: [(&str, &str); 23] = [
     ("builtin_interfaces/Duration", include_str!("msg/builtin_interfaces/Duration.msg")),
     ("builtin_interfaces/Time", include_str!("msg/builtin_interfaces/Time.msg")),
-    ("dyfos_msgs/Ape", include_str!("msg/dyfos_msgs/Ape.msg")),
-    ("dyfos_msgs/Measurement", include_str!("msg/dyfos_msgs/Measurement.msg")),
-    ("dyfos_msgs/RendezvousAnswer", include_str!("msg/dyfos_msgs/RendezvousAnswer.msg")),
+    ("dyfos_msgs/Ape", include_str!("../../../../ros/dyfos_msgs/msg/Ape.msg")),
+    ("dyfos_msgs/Measurement", include_str!("../../../../ros/dyfos_msgs/msg/Measurement.msg")),
+    ("dyfos_msgs/RendezvousAnswer", include_str!("../../../../ros/dyfos_msgs/msg/RendezvousAnswer.msg")),
     ("geometry_msgs/Point", include_str!("msg/geometry_msgs/Point.msg")),
     ("geometry_msgs/Pose", include_str!("msg/geometry_msgs/Pose.msg")),
     ("geometry_msgs/PoseStamped", include_str!("msg/geometry_msgs/PoseStamped.msg")),

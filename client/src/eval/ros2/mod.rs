@@ -22,10 +22,10 @@
 //! | `/dyfos/rendezvous/measurement` | `dyfos_msgs/msg/Measurement` (NaN where the viewer had no value) |
 //! | `/dyfos/ape` | `dyfos_msgs/msg/Ape` |
 //!
-//! The `dyfos_msgs` types are defined in `msg/dyfos_msgs/` and travel in the
+//! The `dyfos_msgs` types are defined in the `dyfos_msgs` package (`ros/dyfos_msgs/msg/`) and travel in the
 //! file's schemas, so any MCAP reader decodes them; `ros2 bag play` publishes them
-//! where a `dyfos_msgs` package with these definitions is installed, and skips
-//! those three topics elsewhere.
+//! where `dyfos_msgs` is installed (`ros/install.sh`), and skips those three
+//! topics elsewhere.
 //!
 //! Foxglove's scene entities become markers: the entity's id is the marker
 //! namespace, its primitives the ids 0, 1, …; cubes or spheres of one size and
