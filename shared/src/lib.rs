@@ -21,6 +21,7 @@
 
 pub mod answer;
 pub mod limits;
+pub mod map_json;
 pub mod math;
 pub mod params;
 pub mod posterior;
