@@ -283,9 +283,10 @@ impl dyfos_rendezvous_request {
     }
 }
 
-/// Map deltas from a JSON array (the `dyfos map apply` file format).
+/// Map deltas from a JSON array (the `dyfos map apply` file format, `docs/deltas.md`);
+/// the message names the field and shows a valid example of the kind at fault.
 pub(crate) fn deltas_from_json(text: &str) -> Result<Vec<MapDelta>, Failure> {
-    serde_json::from_str(text).map_err(|e| Failure::invalid(format!("deltas: not a JSON array of map deltas: {e}")))
+    dyfos_shared::map_json::deltas_from_json(text).map_err(|e| Failure::invalid(e.to_string()))
 }
 
 /// Candidates evaluated, split by the first constraint that rejected them.

@@ -130,7 +130,7 @@ int main(int argc, char** argv) {
   EXPECT_THROW(client.rendezvous(bad), dyfos::DeadlineExceededError, DYFOS_STATUS_DEADLINE_EXCEEDED);
   bad = request;
   std::string many = "[";
-  for (int i = 0; i < 1100; ++i) many += i ? ",\"Clear\"" : "\"Clear\"";
+  for (int i = 0; i < 1100; ++i) many += i ? ",{\"clear\": {}}" : "{\"clear\": {}}";
   bad.deltas_json = many + "]";
   EXPECT_THROW(client.rendezvous(bad), dyfos::BusyError, DYFOS_STATUS_OVER_CAPACITY);
   const std::uint64_t tiny = 888000 + map % 1000;
@@ -141,8 +141,9 @@ int main(int argc, char** argv) {
   bad.map = tiny;
   bad.expected_version.reset();
   EXPECT_THROW(client.rendezvous(bad), dyfos::NoFeasiblePoseError, DYFOS_STATUS_NO_FEASIBLE_POSE);
-  EXPECT_THROW(client.apply(tiny, "[\"Clear\"]", 5), dyfos::VersionMismatchError, DYFOS_STATUS_MAP_VERSION_MISMATCH);
-  EXPECT_TRUE(client.apply(tiny, "[\"Clear\"]", 0) == 1);
+  EXPECT_THROW(client.apply(tiny, "[{\"clear\": {}}]", 5), dyfos::VersionMismatchError,
+               DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  EXPECT_TRUE(client.apply(tiny, "[{\"clear\": {}}]", 0) == 1);
   EXPECT_TRUE(client.snapshot(tiny).find("\"version\": 1") != std::string::npos);
   {
     dyfos::Client hasty(prefix, domain, std::chrono::milliseconds(1));

@@ -7,7 +7,8 @@
  * Every expectation that fails is printed to stderr and makes the exit code 1.
  * stdout carries sections the driver reads, each starting with a line "--- NAME":
  *   --- answer ALGORITHM SEED   the answer's JSON (dyfos_answer_to_json)
- *   --- snapshot MAP            the snapshot JSON of the small map
+ *   --- snapshot MAP            the snapshot JSON of the small map, after the deltas of
+ *                               $DYFOS_TEST_DELTAS (a file of every kind, docs/deltas.md)
  *   --- octomap                 the version of the OctoMap map (with $DYFOS_TEST_OCTOMAP set)
  *   --- kill                    the driver kills the daemon, then writes a line to stdin
  *   --- done
@@ -235,16 +236,16 @@ int main(int argc, char **argv) {
   bad.deadline_micros = 1; /* passes before a worker takes it */
   EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_DEADLINE_EXCEEDED);
   bad = request;
-  bad.deltas_json = "[{\"RemoveObstacle\": {\"id\": 404}}]";
+  bad.deltas_json = "[{\"remove_obstacle\": {\"id\": 404}}]";
   EXPECT(dyfos_client_check(client, &bad, &checked), DYFOS_STATUS_INVALID_DELTA);
   bad.deltas_json = "[not json";
   EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_INVALID_ARGUMENT);
   {
     /* More inline deltas than a request may carry: over capacity, refused before sending. */
     size_t n = 1100;
-    char *many = malloc(n * 8 + 3);
+    char *many = malloc(n * 16 + 3);
     strcpy(many, "[");
-    for (size_t i = 0; i < n; i++) strcat(many, i ? ",\"Clear\"" : "\"Clear\"");
+    for (size_t i = 0; i < n; i++) strcat(many, i ? ",{\"clear\": {}}" : "{\"clear\": {}}");
     strcat(many, "]");
     bad.deltas_json = many;
     EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_OVER_CAPACITY);
@@ -264,13 +265,26 @@ int main(int argc, char **argv) {
   bad.expected_version = DYFOS_ANY_VERSION;
   EXPECT(dyfos_client_rendezvous(client, &bad, &answer), DYFOS_STATUS_NO_FEASIBLE_POSE);
   uint64_t applied = 99;
-  EXPECT(dyfos_client_apply(client, tiny_map, "[{\"RemoveObstacle\": {\"id\": 5}}]", DYFOS_ANY_VERSION, &applied),
+  EXPECT(dyfos_client_apply(client, tiny_map, "[{\"remove_obstacle\": {\"id\": 5}}]", DYFOS_ANY_VERSION, &applied),
          DYFOS_STATUS_INVALID_DELTA);
-  EXPECT(dyfos_client_apply(client, tiny_map, "[\"Clear\"]", 3, &applied), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  const char *clear = "[{\"clear\": {}}]";
+  EXPECT(dyfos_client_apply(client, tiny_map, clear, 3, &applied), DYFOS_STATUS_MAP_VERSION_MISMATCH);
   EXPECT(dyfos_client_apply(client, tiny_map, "{}", 0, &applied), DYFOS_STATUS_INVALID_ARGUMENT);
-  EXPECT(dyfos_client_apply(client, 424242, "[\"Clear\"]", DYFOS_ANY_VERSION, &applied), DYFOS_STATUS_UNKNOWN_MAP);
-  EXPECT(dyfos_client_apply(client, tiny_map, "[\"Clear\"]", 0, &applied), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_apply(client, 424242, clear, DYFOS_ANY_VERSION, &applied), DYFOS_STATUS_UNKNOWN_MAP);
+  EXPECT(dyfos_client_apply(client, tiny_map, clear, 0, &applied), DYFOS_STATUS_OK);
   EXPECT_TRUE(applied == 1);
+  /* The old spelling is refused with the kind's new name and an example of it. */
+  EXPECT(dyfos_client_apply(client, tiny_map, "[\"Clear\"]", DYFOS_ANY_VERSION, &applied),
+         DYFOS_STATUS_INVALID_ARGUMENT);
+  EXPECT_TRUE(dyfos_last_error(message, sizeof message) > 0 && strstr(message, "deltas[0]") != NULL &&
+              strstr(message, "a valid clear: {\"clear\": {}}") != NULL);
+  const char *deltas_path = getenv("DYFOS_TEST_DELTAS");
+  if (deltas_path) {
+    char *deltas = read_file(deltas_path);
+    EXPECT_TRUE(deltas != NULL);
+    if (deltas) EXPECT(dyfos_client_apply(client, tiny_map, deltas, 1, &applied), DYFOS_STATUS_OK);
+    free(deltas);
+  }
   char *snapshot = NULL;
   EXPECT(dyfos_client_snapshot(client, tiny_map, &snapshot), DYFOS_STATUS_OK);
   if (snapshot) printf("--- snapshot %llu\n%s\n", (unsigned long long)tiny_map, snapshot);
