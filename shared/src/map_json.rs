@@ -22,6 +22,13 @@
 //! A scenario's `voxels` object is a valid `set_voxels` value, and a snapshot's
 //! fields other than `map` and `version` are a scenario's map fields.
 //!
+//! *Interpretation (SPEC §1, §11):* the kinds are SPEC §1's deltas (upsert obstacle,
+//! remove obstacle, set voxels occupied or free, set sun, set bounds, clear), plus
+//! `set_voxel_blocks`, the compact form of `set_voxels` the daemon uploads and records
+//! in; they are read as strictly as a scenario (unknown fields, `null` and records
+//! written as arrays are errors), and their values are checked by the map they are
+//! applied to, with SPEC §11's ranges.
+//!
 //! [`MapDelta`]'s serde form is this spelling in human-readable formats (JSON), so
 //! every `serde_json` user writes and reads it; compact binary formats (the daemon's
 //! map store, bincode) keep the derived layout stored maps were written in.
