@@ -2,7 +2,8 @@
 //!
 //! Everything both sides of DyFOS agree on, with no I/O: the math types, the world
 //! map and its ray queries, the sensor geometry, the SDSMM noise models, the Kalman
-//! posterior, scenario files and the wire types of the daemon's services.
+//! posterior, scenario files, the JSON of maps and map deltas (`map_json`) and the
+//! wire types of the daemon's services.
 //!
 //! ```
 //! use dyfos_shared::prelude::*;
@@ -21,6 +22,7 @@
 
 pub mod answer;
 pub mod limits;
+pub mod map_json;
 pub mod math;
 pub mod params;
 pub mod posterior;

@@ -15,13 +15,12 @@
 //! assert!(err.contains("did you mean `rho_min`?"), "{err}");
 //! ```
 
-use crate::limits::MAX_OBSTACLES;
-use crate::math::{Point2, Point3, Vector3, rows3};
+use crate::map_json::{RawObstacle, RawSun, RawVoxels, world_of};
+use crate::math::{Point3, Vector3, rows3};
 use crate::params::{ModelKind, Params};
 use crate::posterior::Belief;
-use crate::world::{AxisBox, Bounds, Obstacle, VerticalCylinder, VoxelGrid, World};
+use crate::world::{VoxelGrid, World};
 use serde::{Deserialize, Deserializer, Serialize};
-use std::collections::BTreeMap;
 
 /// A validated scenario: the world, the rendezvous belief and the parameters.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,7 +70,7 @@ impl ScenarioError {
         }
     }
 
-    fn invalid(path: impl Into<String>, message: impl ToString) -> Self {
+    pub(crate) fn invalid(path: impl Into<String>, message: impl ToString) -> Self {
         ScenarioError::Invalid { path: path.into(), message: message.to_string() }
     }
 }
@@ -114,7 +113,7 @@ impl<T: Serialize> Serialize for Object<T> {
 }
 
 /// Deserializes a field that may be absent but, if present, must not be `null`.
-fn present<'de, D: Deserializer<'de>, T: Deserialize<'de>>(d: D) -> Result<Option<T>, D::Error> {
+pub(crate) fn present<'de, D: Deserializer<'de>, T: Deserialize<'de>>(d: D) -> Result<Option<T>, D::Error> {
     T::deserialize(d).map(Some)
 }
 
@@ -143,50 +142,9 @@ struct RawOctomap {
 
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawSun {
-    elevation: f64,
-    azimuth: f64,
-}
-
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawObstacle {
-    id: u32,
-    #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
-    cylinder: Option<Object<RawCylinder>>,
-    #[serde(rename = "box", default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
-    box_: Option<Object<RawBox>>,
-}
-
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawCylinder {
-    x: f64,
-    y: f64,
-    radius: f64,
-    height: f64,
-}
-
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawBox {
-    min: [f64; 3],
-    max: [f64; 3],
-}
-
-#[derive(Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
 struct RawRover {
     mean: [f64; 3],
     cov: [[f64; 3]; 3],
-}
-
-#[derive(Debug, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawVoxels {
-    resolution: f64,
-    origin: [f64; 3],
-    occupied: Vec<[i64; 3]>,
 }
 
 macro_rules! raw_params {
@@ -273,19 +231,23 @@ fn levenshtein(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
-/// Appends "did you mean `x`?" to serde's unknown-field message.
+/// Appends "did you mean `x`?" to serde's unknown-field and unknown-variant
+/// messages. Names are compared without case and underscores, so that
+/// `SetSun` finds `set_sun`.
 fn suggest(message: String) -> String {
-    let Some(rest) = message.strip_prefix("unknown field `") else {
+    let Some(rest) = message.strip_prefix("unknown field `").or_else(|| message.strip_prefix("unknown variant `"))
+    else {
         return message;
     };
     let Some((field, expected)) = rest.split_once('`') else {
         return message;
     };
+    let plain = |name: &str| name.to_lowercase().replace('_', "");
     let best = expected
         .split('`')
         .skip(1)
         .step_by(2)
-        .map(|c| (levenshtein(field, c), c))
+        .map(|c| (levenshtein(&plain(field), &plain(c)), c))
         .min()
         .filter(|(d, c)| *d <= 2.max(c.len() / 3));
     match best {
@@ -310,11 +272,12 @@ fn malformed(path: String, inner: serde_json::Error) -> ScenarioError {
     ScenarioError::Malformed { path, message: suggest(message), line, column }
 }
 
-/// Parses exactly one JSON object of type `T` (white space around it allowed,
-/// nothing after it); errors name the field, under `root`.
-fn parse_object<T: serde::de::DeserializeOwned>(json: &str, root: &str) -> Result<T, ScenarioError> {
+/// Parses exactly one JSON value of type `T` (white space around it allowed,
+/// nothing after it); errors name the field, under `root` (`params.rho_min`,
+/// `deltas[2].set_sun`).
+pub(crate) fn parse_json<T: serde::de::DeserializeOwned>(json: &str, root: &str) -> Result<T, ScenarioError> {
     let de = &mut serde_json::Deserializer::from_str(json);
-    let raw: Object<T> = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
+    let value: T = serde_path_to_error::deserialize(&mut *de).map_err(|e| {
         let mut path = e.path().to_string();
         if inner_is_unknown_field(&e) {
             // The path ends in the unknown name itself; report its parent.
@@ -323,12 +286,18 @@ fn parse_object<T: serde::de::DeserializeOwned>(json: &str, root: &str) -> Resul
         let path = match path.as_str() {
             _ if root.is_empty() => path,
             "." | "" => root.to_string(),
+            p if p.starts_with('[') => format!("{root}{p}"),
             p => format!("{root}.{p}"),
         };
         malformed(path, e.into_inner())
     })?;
     de.end().map_err(|e| malformed(root.to_string(), e))?;
-    Ok(raw.0)
+    Ok(value)
+}
+
+/// As [`parse_json`], for a document that must be a JSON object.
+fn parse_object<T: serde::de::DeserializeOwned>(json: &str, root: &str) -> Result<T, ScenarioError> {
+    parse_json::<Object<T>>(json, root).map(|o| o.0)
 }
 
 /// Parses a scenario's `params` object on its own (SPEC §11 names, every field
@@ -394,55 +363,7 @@ impl Scenario {
     }
 
     fn from_raw(raw: RawScenario, octomap: Option<VoxelGrid>) -> Result<Self, ScenarioError> {
-        let bounds = Bounds::new(raw.bounds).map_err(|e| ScenarioError::invalid("bounds", e.problem))?;
-        let sun = crate::world::Sun::new(raw.sun.elevation, raw.sun.azimuth)
-            .map_err(|e| ScenarioError::invalid(format!("sun.{}", e.field), format!("= {} {}", e.value, e.rule)))?;
-        if raw.obstacles.len() > MAX_OBSTACLES {
-            return Err(ScenarioError::invalid(
-                "obstacles",
-                format!("{} obstacles exceed the limit of {MAX_OBSTACLES}", raw.obstacles.len()),
-            ));
-        }
-        let mut first_index: BTreeMap<u32, usize> = BTreeMap::new();
-        let mut obstacles = Vec::with_capacity(raw.obstacles.len());
-        for (i, o) in raw.obstacles.iter().enumerate() {
-            let (kind, obstacle) = match (&o.cylinder, &o.box_) {
-                (Some(c), None) => (
-                    "cylinder",
-                    Obstacle::Cylinder(VerticalCylinder {
-                        center: Point2::new(c.x, c.y),
-                        radius: c.radius,
-                        height: c.height,
-                    }),
-                ),
-                (None, Some(b)) => {
-                    ("box", Obstacle::Box(AxisBox { min: Point3::from(b.min), max: Point3::from(b.max) }))
-                }
-                _ => {
-                    return Err(ScenarioError::invalid(
-                        format!("obstacles[{i}]"),
-                        "needs exactly one of `cylinder` or `box`",
-                    ));
-                }
-            };
-            obstacle.validate().map_err(|e| ScenarioError::invalid(format!("obstacles[{i}].{kind}"), e))?;
-            if let Some(j) = first_index.insert(o.id, i) {
-                return Err(ScenarioError::invalid(
-                    format!("obstacles[{i}].id"),
-                    format!("duplicate obstacle id {} (also obstacles[{j}])", o.id),
-                ));
-            }
-            obstacles.push((o.id, obstacle));
-        }
-        let voxels = match &raw.voxels {
-            None => octomap,
-            Some(v) => Some(
-                VoxelGrid::new(v.resolution, Point3::from(v.origin), v.occupied.iter().copied())
-                    .map_err(|e| ScenarioError::invalid("voxels", e))?,
-            ),
-        };
-        let world =
-            World::new(0, bounds, sun, obstacles, voxels).map_err(|e| ScenarioError::invalid("obstacles", e))?;
+        let world = world_of(0, raw.bounds, &raw.sun, &raw.obstacles, raw.voxels.as_deref(), octomap)?;
         let belief = Belief::new(raw.rover.mean, raw.rover.cov).map_err(|e| match e {
             crate::posterior::BeliefError::Mean { index, value } => {
                 ScenarioError::invalid(format!("rover.mean[{index}]"), format!("= {value} must be a finite number"))
@@ -464,37 +385,11 @@ impl Scenario {
         let w = &self.world;
         let raw = RawScenario {
             bounds: w.bounds().to_array(),
-            sun: Object(RawSun { elevation: w.sun().elevation, azimuth: w.sun().azimuth }),
-            obstacles: w
-                .obstacles()
-                .iter()
-                .map(|(id, o)| match o {
-                    Obstacle::Cylinder(c) => Object(RawObstacle {
-                        id: *id,
-                        cylinder: Some(Object(RawCylinder {
-                            x: c.center.x,
-                            y: c.center.y,
-                            radius: c.radius,
-                            height: c.height,
-                        })),
-                        box_: None,
-                    }),
-                    Obstacle::Box(b) => Object(RawObstacle {
-                        id: *id,
-                        cylinder: None,
-                        box_: Some(Object(RawBox { min: b.min.coords.into(), max: b.max.coords.into() })),
-                    }),
-                })
-                .collect(),
+            sun: Object(RawSun::of(w.sun())),
+            obstacles: w.obstacles().iter().map(|(id, o)| Object(RawObstacle::of(*id, o))).collect(),
             rover: Object(RawRover { mean: self.belief.mean.into(), cov: rows3(self.belief.cov.matrix()) }),
             params: Some(Object(RawParams::explicit(&self.params))),
-            voxels: w.voxels().map(|v| {
-                Object(RawVoxels {
-                    resolution: v.resolution(),
-                    origin: v.origin().coords.into(),
-                    occupied: v.cells_sorted(),
-                })
-            }),
+            voxels: w.voxels().map(|v| Object(RawVoxels::of(v))),
             octomap: None,
         };
         serde_json::to_string_pretty(&raw).expect("scenario serializes")

@@ -56,6 +56,7 @@ fn read_complete(path: &Path) -> BTreeMap<String, Vec<serde_json::Value>> {
     for topic in topics::ALL {
         assert!(topics_seen.contains(&topic), "channel {topic} missing: {topics_seen:?}");
     }
+    let mut schemas: BTreeMap<String, serde_json::Value> = BTreeMap::new();
     for channel in summary.channels.values() {
         assert_eq!(channel.message_encoding, "json");
         let schema = channel.schema.as_ref().expect("every channel has a schema");
@@ -63,11 +64,17 @@ fn read_complete(path: &Path) -> BTreeMap<String, Vec<serde_json::Value>> {
         assert_eq!(schema.encoding, "jsonschema");
         let parsed: serde_json::Value = serde_json::from_slice(&schema.data).expect("the schema is JSON");
         assert_eq!(parsed["title"], schema.name.as_str());
+        schemas.insert(channel.topic.clone(), parsed);
     }
     let mut out: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
     for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
         let m = m.expect("every message reads back");
-        let json = serde_json::from_slice(&m.data).expect("every message is JSON");
+        let json: serde_json::Value = serde_json::from_slice(&m.data).expect("every message is JSON");
+        // Every field written is one its schema declares.
+        let declared = &schemas[&m.channel.topic]["properties"];
+        for field in json.as_object().expect("every message is an object").keys() {
+            assert!(declared.get(field).is_some(), "{}: `{field}` is not in the schema {declared}", m.channel.topic);
+        }
         out.entry(m.channel.topic.clone()).or_default().push(json);
     }
     let stats = summary.stats.expect("statistics");
@@ -350,4 +357,134 @@ fn file_index(bytes: &[u8]) -> usize {
     let head = stream.map_while(Result::ok).find(|m| m.channel.topic == topics::CONFIG).expect("a head");
     let json: serde_json::Value = serde_json::from_slice(&head.data).unwrap();
     json["file_index"].as_u64().unwrap() as usize
+}
+
+/// A delta in the spelling recordings held before `docs/deltas.md` (serde's derived
+/// form of the Rust type), written from the current one: what an old file holds.
+fn old_spelling(delta: &serde_json::Value) -> serde_json::Value {
+    use serde_json::json;
+    let (kind, v) = delta.as_object().and_then(|o| o.iter().next()).expect("a delta is a one-key object");
+    let run = |items: &str| {
+        let occupied = v.get("occupied").is_some();
+        let list = if occupied { &v["occupied"] } else { &v["free"] };
+        json!({"resolution": v["resolution"], "origin": v["origin"], items: list, "occupied": occupied})
+    };
+    match kind.as_str() {
+        "upsert_obstacle" => {
+            let obstacle = match (v.get("cylinder"), v.get("box")) {
+                (Some(c), _) => {
+                    json!({"Cylinder": {"center": [c["x"], c["y"]], "radius": c["radius"], "height": c["height"]}})
+                }
+                (_, Some(b)) => json!({"Box": {"min": b["min"], "max": b["max"]}}),
+                _ => panic!("{delta}"),
+            };
+            json!({"UpsertObstacle": {"id": v["id"], "obstacle": obstacle}})
+        }
+        "remove_obstacle" => json!({"RemoveObstacle": {"id": v["id"]}}),
+        "set_voxels" => json!({"SetVoxels": run("cells")}),
+        "set_voxel_blocks" => json!({"SetVoxelBlocks": run("blocks")}),
+        "set_sun" => json!({"SetSun": v}),
+        "set_bounds" => json!({"SetBounds": {"min": [v[0], v[1]], "max": [v[2], v[3]]}}),
+        "clear" => json!("Clear"),
+        other => panic!("unknown kind {other}"),
+    }
+}
+
+/// Copies a finished recording with every delta in the old spelling; returns how
+/// many deltas it rewrote.
+fn rewrite_in_old_spelling(from: &Path, to: &Path) -> usize {
+    let bytes = std::fs::read(from).unwrap();
+    let file = std::io::BufWriter::new(std::fs::File::create(to).unwrap());
+    let mut out = mcap::WriteOptions::new().compression(None).create(file).unwrap();
+    let mut channels: BTreeMap<String, u16> = BTreeMap::new();
+    let mut rewritten = 0;
+    // The delta arrays of a message, where it has them.
+    let mut rewrite = |json: &mut serde_json::Value, path: &[&str]| {
+        let list = path.iter().try_fold(json, |v, key| v.get_mut(*key));
+        for d in list.and_then(serde_json::Value::as_array_mut).into_iter().flatten() {
+            *d = old_spelling(d);
+            rewritten += 1;
+        }
+    };
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let channel = match channels.get(&m.channel.topic) {
+            Some(id) => *id,
+            None => {
+                let schema = m.channel.schema.as_ref().unwrap();
+                let schema_id = out.add_schema(&schema.name, &schema.encoding, schema.data.as_ref()).unwrap();
+                let id = out.add_channel(schema_id, &m.channel.topic, "json", &BTreeMap::new()).unwrap();
+                channels.insert(m.channel.topic.clone(), id);
+                id
+            }
+        };
+        let mut json: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        match m.channel.topic.as_str() {
+            topics::MAP_STATE => rewrite(&mut json, &["content"]),
+            topics::MAP_CHANGE => {
+                rewrite(&mut json, &["deltas"]);
+                rewrite(&mut json, &["state", "content"]);
+            }
+            topics::RENDEZVOUS => rewrite(&mut json, &["request", "deltas"]),
+            _ => {}
+        }
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: m.sequence,
+            log_time: m.log_time,
+            publish_time: m.publish_time,
+        };
+        out.write_to_known_channel(&header, &serde_json::to_vec(&json).unwrap()).unwrap();
+    }
+    out.finish().unwrap();
+    rewritten
+}
+
+/// Recordings made before deltas had the spelling of `docs/deltas.md` hold serde's
+/// derived form (`{"UpsertObstacle": {"id": 1, "obstacle": {"Cylinder": …}}}`):
+/// they still replay, every answer identical. Two files: one whose maps came by
+/// `create`, `upload`, `apply` and inline deltas, one that starts with map states.
+#[test]
+fn a_recording_in_the_old_delta_spelling_still_replays() {
+    let sandbox = Sandbox::new("record-old");
+    let dir = Dir::new("old");
+    let first = dir.0.join("first.mcap");
+    let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", first.to_str().unwrap()]);
+    drive(&sandbox, 6);
+    assert!(daemon.terminate().success(), "{}", daemon.log());
+    // The maps are kept in the state directory: the next file starts with them.
+    let second = dir.0.join("second.mcap");
+    let mut daemon = sandbox.start_daemon_logging("info", &["--record", second.to_str().unwrap()]);
+    let maps = maps();
+    let mut c = sandbox.client();
+    for seed in 0..3 {
+        let request =
+            RendezvousRequest { algorithm: Algorithm::Center, seed, ..RendezvousRequest::new(3, maps[2].belief) };
+        c.rendezvous(&request, TIMEOUT).expect("a query of a kept map");
+    }
+    let inline = RendezvousRequest {
+        deltas: vec![MapDelta::SetSun(Sun::new(0.4, 2.0).unwrap()), MapDelta::Clear],
+        ..RendezvousRequest::new(WRITER_MAP, maps[0].belief)
+    };
+    c.check(&inline, TIMEOUT).expect("a check with inline deltas");
+    assert!(daemon.terminate().success(), "{}", daemon.log());
+
+    for (file, expect_states) in [(&first, false), (&second, true)] {
+        let messages = read_complete(file);
+        assert_eq!(messages.contains_key(topics::MAP_STATE), expect_states, "{}", file.display());
+        let old = file.with_extension("old.mcap");
+        let rewritten = rewrite_in_old_spelling(file, &old);
+        assert!(rewritten > 0, "{}: no delta to rewrite", file.display());
+        let old_text = String::from_utf8_lossy(&std::fs::read(&old).unwrap()).into_owned();
+        assert!(old_text.contains("\"UpsertObstacle\"") && !old_text.contains("upsert_obstacle\":"), "{old_text}");
+        let (new_run, old_run) = (replay(&[file.to_str().unwrap()]), replay(&[old.to_str().unwrap()]));
+        let summary = |o: &Output| text(o).lines().last().unwrap_or("").split_once(": ").map(|(_, s)| s.to_string());
+        assert_eq!(old_run.status.code(), Some(0), "{}", text(&old_run));
+        assert!(
+            text(&old_run).contains(" 0 different") && text(&old_run).contains("recording complete"),
+            "{}",
+            text(&old_run)
+        );
+        assert_eq!(summary(&old_run), summary(&new_run), "the old file replays as the new one");
+    }
 }

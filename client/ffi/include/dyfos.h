@@ -816,6 +816,18 @@ dyfos_status dyfos_client_upload_octomap(struct dyfos_client *client,
  * of deltas is `DYFOS_STATUS_MALFORMED_DELTA`; a delta the map refuses,
  * `DYFOS_STATUS_INVALID_DELTA`.
  *
+ * The format (`docs/deltas.md`): each delta is an object with one key, its kind; an
+ * obstacle, voxels, sun or bounds are written as in a scenario file (SPEC §11):
+ * `{"upsert_obstacle": {"id": 1, "cylinder": {"x": 2.0, "y": 1.0, "radius": 0.5, "height": 10.0}}}`,
+ * `{"upsert_obstacle": {"id": 2, "box": {"min": [4.0, 4.0, 0.0], "max": [5.0, 6.0, 3.0]}}}`,
+ * `{"remove_obstacle": {"id": 2}}`,
+ * `{"set_voxels": {"resolution": 0.1, "origin": [0.0, 0.0, 0.0], "occupied": [[1, 2, 3]]}}`
+ * (`"free"` in place of `"occupied"` frees the cells),
+ * `{"set_voxel_blocks": {"resolution": 0.1, "origin": [0.0, 0.0, 0.0], "occupied": [{"min": [0, 0, 4], "mask": 7}]}}`,
+ * `{"set_sun": {"elevation": 0.5, "azimuth": 1.0}}`, `{"set_bounds": [-20.0, -20.0, 20.0, 20.0]}`,
+ * `{"clear": {}}`. A document not of this form is `DYFOS_STATUS_MALFORMED_DELTA`, and
+ * `dyfos_last_error` names the field and shows a valid example of its kind.
+ *
  * # Safety
  * `deltas_json` is NULL (refused) or NUL-terminated; `version_out` is NULL or writable.
  */

@@ -319,10 +319,11 @@ impl dyfos_rendezvous_request {
     }
 }
 
-/// Map deltas from a JSON array (the `dyfos map apply` file format).
+/// Map deltas from a JSON array (the `dyfos map apply` file format, `docs/deltas.md`);
+/// the message names the field and shows a valid example of the kind at fault.
 pub(crate) fn deltas_from_json(text: &str) -> Result<Vec<MapDelta>, Failure> {
-    serde_json::from_str(text)
-        .map_err(|e| Failure::new(DYFOS_STATUS_MALFORMED_DELTA, format!("deltas: not a JSON array of map deltas: {e}")))
+    dyfos_shared::map_json::deltas_from_json(text)
+        .map_err(|e| Failure::new(DYFOS_STATUS_MALFORMED_DELTA, e.to_string()))
 }
 
 /// Candidates evaluated, split by the first constraint that rejected them.
@@ -646,7 +647,7 @@ mod tests {
             assert_eq!(failure.code, DYFOS_STATUS_MALFORMED_DELTA, "{text:?}: {}", failure.message);
         }
         let good =
-            dyfos_rendezvous_request { deltas_json: c"[\"Clear\"]".as_ptr(), ..dyfos_rendezvous_request::defaults() };
+            dyfos_rendezvous_request { deltas_json: c"[{\"clear\": {}}]".as_ptr(), ..dyfos_rendezvous_request::defaults() };
         assert_eq!(decoded(good).unwrap().deltas, vec![MapDelta::Clear]);
     }
 

@@ -5,7 +5,8 @@
 //! belief's mean and covariance are read here straight from any sequence or numpy
 //! array; dicts cross as JSON text and are read with the same
 //! functions the `dyfos` command line uses (`params_from_json`, `Scenario::from_json`,
-//! serde for map deltas), so Python and Rust cannot disagree on a format.
+//! `map_json` for map deltas and snapshots), so Python and Rust cannot disagree on a
+//! format.
 //!
 //! Every call releases the GIL while it waits on the daemon. A [`PyClient`] holds
 //! its Rust client behind a mutex: several Python threads may share it, and their
@@ -223,14 +224,11 @@ impl RequestArgs<'_> {
     }
 }
 
-/// A JSON array of map deltas, as in `dyfos map apply` files.
+/// A JSON array of map deltas, as in `dyfos map apply` files (`docs/deltas.md`);
+/// the error names the field, shows a valid example and gives the delta's index.
 fn deltas_from_json(json: &str) -> Result<Vec<MapDelta>, ErrorInfo> {
-    serde_json::from_str(json).map_err(|e| {
-        ErrorInfo::new(
-            "malformed_delta",
-            format!("deltas: {e}; expected a list like [{{\"RemoveObstacle\": {{\"id\": 3}}}}]"),
-        )
-    })
+    dyfos_shared::map_json::deltas_from_json(json)
+        .map_err(|e| ErrorInfo { index: e.index().map(|i| i as u64), ..ErrorInfo::new("malformed_delta", &e) })
 }
 
 /// The answer to a rendezvous query, as the JSON object `dyfos solve` prints.
@@ -439,8 +437,8 @@ impl PyClient {
         json_to_py(py, &stats.to_json())
     }
 
-    /// Makes sure the daemon holds the map of a scenario (JSON text); returns
-    /// `(map_id, version)`.
+    /// Makes sure the daemon holds the map of a scenario, or of a map as `snapshot`
+    /// gives it (JSON text); returns `(map_id, version)`.
     #[pyo3(signature = (scenario_json, map_id=None, replace=false, timeout=None))]
     fn upload_scenario(
         &self,
@@ -450,9 +448,11 @@ impl PyClient {
         replace: bool,
         timeout: Option<f64>,
     ) -> PyResult<(u64, u64)> {
-        let scenario = Scenario::from_json(scenario_json)
-            .map_err(|e| to_pyerr(py, ErrorInfo::new("invalid_scenario", format!("scenario: {e}"))))?;
-        self.call(py, timeout, |c, t| c.upload_scenario_map(&scenario.world, map_id, replace, t))
+        let world = dyfos_shared::map_json::world_from_json_with_files(scenario_json, |path| {
+            Err(format!("cannot read `{path}`: an OctoMap scenario is uploaded with upload_octomap"))
+        })
+        .map_err(|e| to_pyerr(py, ErrorInfo::new("invalid_scenario", format!("scenario: {e}"))))?;
+        self.call(py, timeout, |c, t| c.upload_scenario_map(&world, map_id, replace, t))
     }
 
     /// Uploads an OctoMap `.bt` file's bytes as map `map_id`; returns the version.
@@ -509,11 +509,7 @@ impl PyClient {
     #[pyo3(signature = (map_id, timeout=None))]
     fn snapshot<'py>(&self, py: Python<'py>, map_id: u64, timeout: Option<f64>) -> PyResult<Bound<'py, PyAny>> {
         let world = self.call(py, timeout, |c, t| c.snapshot(map_id, t))?;
-        let mut json = serde_json::json!({ "map": map_id });
-        if let (Some(out), serde_json::Value::Object(fields)) = (json.as_object_mut(), world.to_json()) {
-            out.extend(fields);
-        }
-        json_to_py(py, &json)
+        json_to_py(py, &dyfos_shared::map_json::map_to_json(Some(map_id), &world))
     }
 
     /// Deletes the map.

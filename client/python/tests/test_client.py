@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import subprocess
 import threading
 from pathlib import Path
 from typing import Any, Dict
@@ -11,7 +12,7 @@ from typing import Any, Dict
 import pytest
 
 import dyfos
-from conftest import DATA, dyfos_cli, slow_scenario, write_json
+from conftest import DATA, DYFOS, Daemon, dyfos_cli, slow_scenario, write_json
 
 EXAMPLE = DATA / "example.json"
 BASIN = DATA / "anisotropic-mirror-basin.json"
@@ -135,10 +136,46 @@ def test_scenario_as_path_text_or_dict_gives_the_same_map(client: dyfos.Client) 
     assert [o["id"] for o in snap["obstacles"]] == [1, 2]
 
 
+def test_the_delta_file_of_every_kind_applies_as_with_dyfos_map_apply(
+    client: dyfos.Client, daemon: Daemon, tmp_path: Path
+) -> None:
+    """The same file (docs/deltas.md's) through ``dyfos map apply`` and through
+    ``Client.apply`` as a path, as JSON text and as a list: the same map each time,
+    and the snapshots read back as scenario-like maps."""
+    deltas = DATA / "deltas-every-kind.json"
+
+    def cli(*args: str) -> Dict[str, Any]:
+        out = subprocess.run([DYFOS, "map", *args, *daemon.flags()], capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        return json.loads(out.stdout)
+
+    cli("create", "7007", "--bounds", "-10", "-10", "10", "10", "--sun", "0.7", "2.1")
+    cli("apply", "7007", str(deltas), "--expected-version", "0")
+    expected = cli("snapshot", "7007")
+    assert expected["obstacles"] == [{"id": 1, "cylinder": {"x": 2.0, "y": 1.0, "radius": 0.5, "height": 10.0}}]
+    assert expected["voxels"]["occupied"] == [[0, 0, 4], [0, 0, 5], [0, 0, 6], [1, 2, 4]]
+    for n, given in enumerate([deltas, deltas.read_text(), json.loads(deltas.read_text())]):
+        map_id = 7100 + n
+        client.create_map(map_id, [-10, -10, 10, 10], (0.7, 2.1))
+        assert client.apply(map_id, given, expected_version=0) == expected["version"]
+        snap = client.snapshot(map_id)
+        assert {**snap, "map": 7007} == expected, type(given)
+    # A snapshot is a map description: it uploads as it is, to the same content.
+    copy_id = client.upload_scenario(expected, map_id=7200)
+    assert {**client.snapshot(copy_id), "map": 7007, "version": expected["version"]} == expected
+    # Its obstacles and voxels are valid deltas as they stand.
+    client.create_map(7201, [-20, -20, 20, 20], (0.5, 1.0))
+    rebuilt = [{"upsert_obstacle": o} for o in expected["obstacles"]] + [{"set_voxels": expected["voxels"]}]
+    client.apply(7201, rebuilt)
+    assert {k: v for k, v in client.snapshot(7201).items() if k not in ("map", "version")} == {
+        k: v for k, v in expected.items() if k not in ("map", "version")
+    }
+
+
 def test_map_life_cycle_create_apply_snapshot_check_delete(client: dyfos.Client, tmp_path: Path) -> None:
     map_id = 0xC0FFEE
     assert client.create_map(map_id, [-10, -10, 10, 10], (0.7, 2.1)) == 0
-    cylinder = {"UpsertObstacle": {"id": 4, "obstacle": {"Cylinder": {"center": [2.0, 1.0], "radius": 0.5, "height": 10.0}}}}
+    cylinder = {"upsert_obstacle": {"id": 4, "cylinder": {"x": 2.0, "y": 1.0, "radius": 0.5, "height": 10.0}}}
     try:
         version = client.apply(map_id, [cylinder], expected_version=0)
     except dyfos.InvalidRequestError as e:
@@ -147,8 +184,8 @@ def test_map_life_cycle_create_apply_snapshot_check_delete(client: dyfos.Client,
     snap = client.snapshot(map_id)
     assert snap["version"] == 1 and [o["id"] for o in snap["obstacles"]] == [4]
     # Deltas as JSON text and as a file, like `dyfos map apply`.
-    assert client.apply(map_id, json.dumps([{"SetSun": {"elevation": 0.5, "azimuth": 1.0}}])) == 2
-    path = write_json(tmp_path, "deltas.json", [{"RemoveObstacle": {"id": 4}}])
+    assert client.apply(map_id, json.dumps([{"set_sun": {"elevation": 0.5, "azimuth": 1.0}}])) == 2
+    path = write_json(tmp_path, "deltas.json", [{"remove_obstacle": {"id": 4}}])
     assert client.apply(map_id, path, expected_version=2) == 3
     assert client.snapshot(map_id)["obstacles"] == []
     assert client.snapshot(map_id)["sun"] == {"elevation": 0.5, "azimuth": 1.0}
@@ -278,7 +315,7 @@ def test_an_octomap_uploads_updates_and_answers_as_its_scenario(client: dyfos.Cl
     assert len(snapshot["voxels"]["occupied"]) == 185_673
     voxels = {"resolution": snapshot["voxels"]["resolution"], "origin": snapshot["voxels"]["origin"]}
     freed = snapshot["voxels"]["occupied"][:10]
-    version = client.apply(0x0C71, [{"SetVoxels": {**voxels, "cells": freed, "occupied": False}}])
+    version = client.apply(0x0C71, [{"set_voxels": {**voxels, "free": freed}}])
     assert version == 1
     assert len(client.snapshot(0x0C71)["voxels"]["occupied"]) == 185_673 - 10
     with pytest.raises(dyfos.InvalidRequestError) as refused:

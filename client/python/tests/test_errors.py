@@ -33,7 +33,7 @@ def raises(family: Type[dyfos.DyfosError], status: str, call: Any, *args: Any, *
 def infeasible_map(client: dyfos.Client, map_id: int) -> None:
     """A map filled by one tall box: the viewer collides wherever it goes."""
     client.create_map(map_id, [-10, -10, 10, 10], (0.7, 2.1))
-    wall = {"UpsertObstacle": {"id": 1, "obstacle": {"Box": {"min": [-10.0, -10.0, 0.0], "max": [10.0, 10.0, 100.0]}}}}
+    wall = {"upsert_obstacle": {"id": 1, "box": {"min": [-10.0, -10.0, 0.0], "max": [10.0, 10.0, 100.0]}}}
     client.apply(map_id, [wall])
 
 
@@ -41,7 +41,7 @@ def test_unknown_map(client: dyfos.Client) -> None:
     raises(dyfos.UnknownMapError, "unknown_map", client.rendezvous, 0xDEAD, MEAN, COV)
     raises(dyfos.UnknownMapError, "unknown_map", client.check, 0xDEAD, MEAN, COV)
     raises(dyfos.UnknownMapError, "unknown_map", client.snapshot, 0xDEAD)
-    raises(dyfos.UnknownMapError, "unknown_map", client.apply, 0xDEAD, [{"Clear": None}])
+    raises(dyfos.UnknownMapError, "unknown_map", client.apply, 0xDEAD, [{"clear": {}}])
 
 
 def test_map_version_mismatch(client: dyfos.Client) -> None:
@@ -67,7 +67,7 @@ def test_map_version_mismatch(client: dyfos.Client) -> None:
         ("invalid_deadline", {"deadline": 7200.0}),
         ("unsupported_model", {"params": {"model": "learned"}}),
         ("malformed_delta", {"deltas": [{"NoSuchDelta": {}}]}),
-        ("invalid_delta", {"deltas": [{"RemoveObstacle": {"id": 99}}]}),
+        ("invalid_delta", {"deltas": [{"remove_obstacle": {"id": 99}}]}),
     ],
 )
 def test_invalid_requests(client: dyfos.Client, status: str, kwargs: Dict[str, Any]) -> None:
@@ -89,11 +89,23 @@ def test_invalid_map_requests(client: dyfos.Client, tmp_path: Path) -> None:
         "invalid_delta",
         client.apply,
         map_id,
-        [{"SetSun": {"elevation": 0.5, "azimuth": 1.0}}, {"RemoveObstacle": {"id": 42}}],
+        [{"set_sun": {"elevation": 0.5, "azimuth": 1.0}}, {"remove_obstacle": {"id": 42}}],
     )
     assert e.index == 1
     assert client.snapshot(map_id)["version"] == 0, "a rejected batch changes nothing"
-    raises(dyfos.InvalidRequestError, "malformed_delta", client.apply, map_id, "[{\"RemoveObstacle\": 3}]")
+    e = raises(dyfos.InvalidRequestError, "malformed_delta", client.apply, map_id, "[{\"remove_obstacle\": 3}]")
+    assert e.index == 0
+    assert e.detail.startswith("deltas[0].remove_obstacle: invalid type: integer `3`, expected a JSON object"), e.detail
+    assert 'a valid remove_obstacle: {"remove_obstacle": {"id": 2}}' in e.detail, e.detail
+    # The spelling before docs/deltas.md: the kind's new name and an example of it.
+    old = [{"set_sun": {"elevation": 0.5, "azimuth": 1.0}}, {"UpsertObstacle": {"id": 1, "obstacle": {}}}]
+    e = raises(dyfos.InvalidRequestError, "malformed_delta", client.apply, map_id, old)
+    assert e.index == 1
+    assert e.detail.startswith("deltas[1]: unknown variant `UpsertObstacle`"), e.detail
+    assert "(did you mean `upsert_obstacle`?)" in e.detail and 'a valid upsert_obstacle: {"upsert_obstacle": {"id": 1' in e.detail
+    e = raises(dyfos.InvalidRequestError, "malformed_delta", client.apply, map_id, [{"set_sun": {"elevation": 0.5}}])
+    assert e.detail.startswith("deltas[0].set_sun: missing field `azimuth`"), e.detail
+    assert client.snapshot(map_id)["version"] == 0, "a malformed batch changes nothing"
     raises(dyfos.InvalidRequestError, "malformed_request", client.create_map, 0x2BAD, [10, 10, -10, -10], (0.7, 2.1))
     raises(dyfos.InvalidRequestError, "invalid_scenario", client.upload_scenario, {"bounds": [0, 0, 1, 1]})
     bad = dyfos.read_scenario(EXAMPLE)
@@ -114,7 +126,7 @@ def test_no_feasible_pose(client: dyfos.Client) -> None:
 
 def test_a_failed_query_tells_the_version_its_inline_deltas_made(client: dyfos.Client) -> None:
     infeasible_map(client, 0xF02)
-    sun = {"SetSun": {"elevation": 0.5, "azimuth": 1.0}}
+    sun = {"set_sun": {"elevation": 0.5, "azimuth": 1.0}}
     e = raises(
         dyfos.NoFeasiblePoseError, "no_feasible_pose", client.rendezvous, 0xF02, MEAN, COV, deltas=[sun, sun]
     )
@@ -143,7 +155,7 @@ def test_deadline_exceeded(client: dyfos.Client) -> None:
 
 def test_over_capacity(client: dyfos.Client) -> None:
     map_id = client.upload_scenario(EXAMPLE)
-    too_many = [{"SetSun": {"elevation": 0.5, "azimuth": 1.0}}] * 1025
+    too_many = [{"set_sun": {"elevation": 0.5, "azimuth": 1.0}}] * 1025
     raises(dyfos.BusyError, "over_capacity", client.rendezvous, map_id, MEAN, COV, deltas=too_many)
 
 

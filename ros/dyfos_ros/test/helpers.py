@@ -106,7 +106,7 @@ def assert_answer_is(response: Any, expected: Dict[str, Any], belief: PoseWithCo
 def infeasible_map(client: dyfos.Client, map_id: int) -> None:
     """A map filled by one tall box: the viewer collides wherever it goes."""
     client.create_map(map_id, [-10, -10, 10, 10], (0.7, 2.1))
-    wall = {"UpsertObstacle": {"id": 1, "obstacle": {"Box": {"min": [-10.0, -10.0, 0.0], "max": [10.0, 10.0, 100.0]}}}}
+    wall = {"upsert_obstacle": {"id": 1, "box": {"min": [-10.0, -10.0, 0.0], "max": [10.0, 10.0, 100.0]}}}
     client.apply(map_id, [wall])
 
 

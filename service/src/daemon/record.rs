@@ -118,6 +118,10 @@ pub mod topics {
     }
 }
 
+/// What a recording's delta arrays hold.
+const DELTAS_DESCRIPTION: &str =
+    "map deltas, as in `dyfos map apply` files (docs/deltas.md), e.g. {\"remove_obstacle\": {\"id\": 3}}";
+
 /// The JSON Schema (draft 2020-12) of a channel's messages: the top-level fields
 /// and their types, for Foxglove's panels.
 pub fn json_schema(topic: &str) -> serde_json::Value {
@@ -128,6 +132,7 @@ pub fn json_schema(topic: &str) -> serde_json::Value {
     let arr = json!({"type": "array"});
     let obj = json!({"type": "object"});
     let str_ = json!({"type": "string"});
+    let deltas = json!({"type": "array", "description": DELTAS_DESCRIPTION});
     let properties = match topic {
         topics::CONFIG => json!({
             "build": {"type": "object", "properties": {"name": str_, "version": str_, "profile": str_}},
@@ -135,16 +140,16 @@ pub fn json_schema(topic: &str) -> serde_json::Value {
         }),
         topics::MAP_STATE => json!({
             "map": int, "version": int, "bounds": arr, "sun": obj,
-            "content": {"type": "array", "description": "MapDelta records (the format of `dyfos map apply` files)"},
+            "content": {"type": "array", "description": DELTAS_DESCRIPTION},
         }),
         topics::MAP_CHANGE => json!({
             "map": int, "cause": {"enum": ["create", "apply", "inline", "upload", "delete"]},
-            "from_version": nint, "version": int, "deltas": arr, "bounds": arr, "sun": obj, "content": arr,
+            "from_version": nint, "version": int, "deltas": deltas, "state": obj,
         }),
         topics::RENDEZVOUS => json!({
             "mode": {"enum": ["solve", "check"]}, "request_id": int, "received_ns": int, "replied_ns": int,
             "request": {"type": "object", "properties": {
-                "map": int, "expected_version": nint, "belief": obj, "deltas": arr, "algorithm": str_,
+                "map": int, "expected_version": nint, "belief": obj, "deltas": deltas, "algorithm": str_,
                 "seed": int, "budget": nint, "deadline_ns": nint, "params": obj}},
             "reply": {"type": "object", "properties": {
                 "status": str_, "algorithm": str_, "stop": str_, "map_version": int, "x": arr, "cost": num,
@@ -201,6 +206,7 @@ pub struct RecordedRequest {
     /// The belief.
     pub belief: RecordedBelief,
     /// Inline deltas (applied before the search).
+    #[serde(deserialize_with = "recorded_deltas")]
     pub deltas: Vec<MapDelta>,
     /// The algorithm's name.
     pub algorithm: String,
@@ -378,6 +384,15 @@ struct RendezvousMessage {
     reply: RecordedReply,
 }
 
+/// Deltas as recorded: in the spelling of `docs/deltas.md`, or in serde's derived
+/// one that recordings made before it hold, so that those still replay.
+fn recorded_deltas<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<MapDelta>, D::Error> {
+    Vec::<serde_json::Value>::deserialize(d)?
+        .into_iter()
+        .map(|v| dyfos_shared::map_json::recorded_delta_from_value(v).map_err(serde::de::Error::custom))
+        .collect()
+}
+
 /// A map's content as recorded: obstacle upserts, then one voxel run if it has a
 /// grid (what [`world_from_content`] rebuilds).
 pub fn content_of(world: &World) -> Vec<MapDelta> {
@@ -407,6 +422,7 @@ pub struct MapState {
     /// The sun.
     pub sun: Sun,
     /// Obstacles and voxels, as [`content_of`] writes them.
+    #[serde(deserialize_with = "recorded_deltas")]
     pub content: Vec<MapDelta>,
 }
 
@@ -457,7 +473,7 @@ pub struct MapChange {
     /// The version it produced (for `delete`, the version deleted).
     pub version: u64,
     /// The deltas (`apply`, `inline`).
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[serde(default, skip_serializing_if = "Vec::is_empty", deserialize_with = "recorded_deltas")]
     pub deltas: Vec<MapDelta>,
     /// The whole new map (`create`, `upload`).
     #[serde(default, skip_serializing_if = "Option::is_none")]

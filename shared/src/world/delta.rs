@@ -7,7 +7,12 @@ use crate::math::Point3;
 use std::collections::BTreeMap;
 
 /// One change to a map.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+///
+/// Its serde form in JSON (any human-readable format) is the one documented
+/// spelling of `docs/deltas.md` ([`crate::map_json`]), e.g. `{"remove_obstacle":
+/// {"id": 3}}`; in compact binary formats (the daemon's map store) it is
+/// [`StoredDelta`]'s.
+#[derive(Debug, Clone, PartialEq)]
 pub enum MapDelta {
     /// Insert the obstacle, or replace the one with the same id.
     UpsertObstacle {
@@ -51,6 +56,42 @@ pub enum MapDelta {
     /// Change the map bounds.
     SetBounds(Bounds),
     /// Remove every obstacle and voxel; bounds and sun stay.
+    Clear,
+}
+
+impl serde::Serialize for MapDelta {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        if s.is_human_readable() {
+            serde::Serialize::serialize(&crate::map_json::DeltaOut::of(self), s)
+        } else {
+            StoredDelta::serialize(self, s)
+        }
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for MapDelta {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        if d.is_human_readable() {
+            <crate::map_json::DeltaIn as serde::Deserialize>::deserialize(d).map(MapDelta::from)
+        } else {
+            StoredDelta::deserialize(d)
+        }
+    }
+}
+
+/// [`MapDelta`] in compact binary formats: serde's derived layout, in which the
+/// daemon's map store (bincode) has always written deltas; it must not change, or
+/// stored maps stop reading. In JSON it is the spelling recordings used before
+/// `docs/deltas.md` (read by [`crate::map_json::recorded_delta_from_value`]).
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(remote = "MapDelta")]
+pub(crate) enum StoredDelta {
+    UpsertObstacle { id: u32, obstacle: Obstacle },
+    RemoveObstacle { id: u32 },
+    SetVoxels { resolution: f64, origin: Point3<f64>, cells: Vec<CellIndex>, occupied: bool },
+    SetVoxelBlocks { resolution: f64, origin: Point3<f64>, blocks: Vec<VoxelBlock>, occupied: bool },
+    SetSun(Sun),
+    SetBounds(Bounds),
     Clear,
 }
 

@@ -25,6 +25,7 @@ pub mod octomap;
 mod segment;
 mod voxels;
 
+pub(crate) use delta::StoredDelta;
 pub use delta::{MapDelta, MapDeltaError, MapDeltaErrorKind};
 pub use obstacle::{AxisBox, Obstacle, ObstacleError, VerticalCylinder};
 pub use segment::{Segment, SegmentEnd};
@@ -275,34 +276,10 @@ impl World {
     }
 
     /// The map as the JSON object `dyfos map snapshot` prints (without its `map` id):
-    /// `version`, `bounds`, `sun`, `obstacles` in scenario form, and `voxels` if any.
+    /// `version`, `bounds`, `sun`, `obstacles` in scenario form, and `voxels` if any
+    /// ([`crate::map_json::map_to_json`]; [`crate::map_json::map_from_json`] reads it back).
     pub fn to_json(&self) -> serde_json::Value {
-        let obstacles: Vec<serde_json::Value> = self
-            .obstacles
-            .iter()
-            .map(|(id, o)| match o {
-                Obstacle::Cylinder(VerticalCylinder { center, radius, height }) => serde_json::json!({
-                    "id": id, "cylinder": {"x": center.x, "y": center.y, "radius": radius, "height": height}
-                }),
-                Obstacle::Box(AxisBox { min, max }) => serde_json::json!({
-                    "id": id, "box": {"min": <[f64; 3]>::from(min.coords), "max": <[f64; 3]>::from(max.coords)}
-                }),
-            })
-            .collect();
-        let mut out = serde_json::json!({
-            "version": self.version,
-            "bounds": self.bounds.to_array(),
-            "sun": {"elevation": self.sun.elevation, "azimuth": self.sun.azimuth},
-            "obstacles": obstacles,
-        });
-        if let Some(v) = &self.voxels {
-            out["voxels"] = serde_json::json!({
-                "resolution": v.resolution(),
-                "origin": <[f64; 3]>::from(v.origin().coords),
-                "occupied": v.cells_sorted(),
-            });
-        }
-        out
+        crate::map_json::map_to_json(None, self)
     }
 
     /// Whether `other` holds the same bounds, sun, obstacles and voxels, whatever

@@ -166,7 +166,7 @@ int main(int argc, char** argv) {
   EXPECT_THROW(client.rendezvous(bad), dyfos::DeadlineExceededError, DYFOS_STATUS_DEADLINE_EXCEEDED);
   bad = request;
   std::string many = "[";
-  for (int i = 0; i < 1100; ++i) many += i ? ",\"Clear\"" : "\"Clear\"";
+  for (int i = 0; i < 1100; ++i) many += i ? ",{\"clear\": {}}" : "{\"clear\": {}}";
   bad.deltas_json = many + "]";
   // Too many records: its own error, not "busy" (a retry cannot help).
   EXPECT_THROW(client.rendezvous(bad), dyfos::OverCapacityError, DYFOS_STATUS_OVER_CAPACITY);
@@ -186,13 +186,14 @@ int main(int argc, char** argv) {
   bad.map = tiny;
   bad.expected_version.reset();
   EXPECT_THROW(client.rendezvous(bad), dyfos::NoFeasiblePoseError, DYFOS_STATUS_NO_FEASIBLE_POSE);
-  EXPECT_THROW(client.apply(tiny, "[\"Clear\"]", 5), dyfos::VersionMismatchError, DYFOS_STATUS_MAP_VERSION_MISMATCH);
-  EXPECT_TRUE(client.apply(tiny, "[\"Clear\"]", 0) == 1);
+  EXPECT_THROW(client.apply(tiny, "[{\"clear\": {}}]", 5), dyfos::VersionMismatchError,
+               DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  EXPECT_TRUE(client.apply(tiny, "[{\"clear\": {}}]", 0) == 1);
   EXPECT_TRUE(client.snapshot(tiny).find("\"version\": 1") != std::string::npos);
-  EXPECT_TRUE(client.apply(tiny, "[\"Clear\", \"Clear\"]", 1) == 3);  // the version counts deltas
+  EXPECT_TRUE(client.apply(tiny, "[{\"clear\": {}}, {\"clear\": {}}]", 1) == 3);  // the version counts deltas
   {
     std::string batch = "[";
-    for (std::uint32_t i = 0; i <= DYFOS_MAX_BATCH_RECORDS; ++i) batch += i ? ",\"Clear\"" : "\"Clear\"";
+    for (std::uint32_t i = 0; i <= DYFOS_MAX_BATCH_RECORDS; ++i) batch += i ? ",{\"clear\": {}}" : "{\"clear\": {}}";
     EXPECT_THROW(client.apply(tiny, batch + "]"), dyfos::OverCapacityError, DYFOS_STATUS_OVER_CAPACITY);
   }
   EXPECT_THROW(client.apply(tiny, "[not json"), dyfos::InvalidRequestError, DYFOS_STATUS_MALFORMED_DELTA);
@@ -217,7 +218,7 @@ int main(int argc, char** argv) {
     EXPECT_THROW(hasty.rendezvous(bad), dyfos::TimeoutError, DYFOS_STATUS_TIMEOUT);
   }
   // The scenario's map changed by a delta: re-uploaded only with replace.
-  EXPECT_TRUE(client.apply(map, "[{\"SetSun\": {\"elevation\": 0.3, \"azimuth\": 1.0}}]", version) == version + 1);
+  EXPECT_TRUE(client.apply(map, "[{\"set_sun\": {\"elevation\": 0.3, \"azimuth\": 1.0}}]", version) == version + 1);
   EXPECT_THROW(client.upload_scenario(scenario), dyfos::InvalidRequestError, DYFOS_STATUS_MAP_EXISTS);
   auto replaced = client.upload_scenario(scenario, true);
   EXPECT_TRUE(replaced.map == map && replaced.version == version + 2);

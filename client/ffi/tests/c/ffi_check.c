@@ -7,7 +7,8 @@
  * Every expectation that fails is printed to stderr and makes the exit code 1.
  * stdout carries sections the driver reads, each starting with a line "--- NAME":
  *   --- answer ALGORITHM SEED   the answer's JSON (dyfos_answer_to_json)
- *   --- snapshot MAP            the snapshot JSON of the small map
+ *   --- snapshot MAP            the snapshot JSON of the small map, after the deltas of
+ *                               $DYFOS_TEST_DELTAS (a file of every kind, docs/deltas.md)
  *   --- octomap                 the version of the OctoMap map (with $DYFOS_TEST_OCTOMAP set)
  *   --- kill                    the driver kills the daemon, then writes a line to stdin
  *   --- done
@@ -236,16 +237,16 @@ int main(int argc, char **argv) {
   bad.deadline_micros = 1; /* passes before a worker takes it */
   EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_DEADLINE_EXCEEDED);
   bad = request;
-  bad.deltas_json = "[{\"RemoveObstacle\": {\"id\": 404}}]";
+  bad.deltas_json = "[{\"remove_obstacle\": {\"id\": 404}}]";
   EXPECT(dyfos_client_check(client, 0, &bad, &checked), DYFOS_STATUS_INVALID_DELTA);
   bad.deltas_json = "[not json";
   EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_MALFORMED_DELTA);
   {
     /* More inline deltas than a request may carry: over capacity, refused before sending. */
     size_t n = 1100;
-    char *many = malloc(n * 8 + 3);
+    char *many = malloc(n * 16 + 3);
     strcpy(many, "[");
-    for (size_t i = 0; i < n; i++) strcat(many, i ? ",\"Clear\"" : "\"Clear\"");
+    for (size_t i = 0; i < n; i++) strcat(many, i ? ",{\"clear\": {}}" : "{\"clear\": {}}");
     strcat(many, "]");
     bad.deltas_json = many;
     EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_OVER_CAPACITY);
@@ -263,7 +264,7 @@ int main(int argc, char **argv) {
   /* The same check gives the same code whichever call makes it: a sun below the
    * horizon's limit, as an argument here and as a delta the daemon checks. */
   EXPECT(dyfos_client_create_map(client, 0, tiny_map + 1, tiny, 5.0, 2.1, NULL), DYFOS_STATUS_INVALID_DELTA);
-  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[{\"SetSun\": {\"elevation\": 5.0, \"azimuth\": 2.1}}]",
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[{\"set_sun\": {\"elevation\": 5.0, \"azimuth\": 2.1}}]",
                             DYFOS_ANY_VERSION, NULL),
          DYFOS_STATUS_INVALID_DELTA);
   bad = request;
@@ -271,14 +272,20 @@ int main(int argc, char **argv) {
   bad.has_expected_version = 0;
   EXPECT(dyfos_client_rendezvous(client, 0, &bad, &answer), DYFOS_STATUS_NO_FEASIBLE_POSE);
   uint64_t applied = 99;
-  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[{\"RemoveObstacle\": {\"id\": 5}}]", DYFOS_ANY_VERSION, &applied),
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[{\"remove_obstacle\": {\"id\": 5}}]", DYFOS_ANY_VERSION, &applied),
          DYFOS_STATUS_INVALID_DELTA);
-  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[\"Clear\"]", 3, &applied), DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  const char *clear = "[{\"clear\": {}}]";
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, clear, 3, &applied), DYFOS_STATUS_MAP_VERSION_MISMATCH);
   EXPECT(dyfos_client_apply(client, 0, tiny_map, "{}", 0, &applied), DYFOS_STATUS_MALFORMED_DELTA);
-  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[{\"Teleport\": 1}]", 0, &applied), DYFOS_STATUS_MALFORMED_DELTA);
-  EXPECT(dyfos_client_apply(client, 0, 424242, "[\"Clear\"]", DYFOS_ANY_VERSION, &applied), DYFOS_STATUS_UNKNOWN_MAP);
-  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[\"Clear\"]", 0, &applied), DYFOS_STATUS_OK);
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[{\"teleport\": 1}]", 0, &applied), DYFOS_STATUS_MALFORMED_DELTA);
+  EXPECT(dyfos_client_apply(client, 0, 424242, clear, DYFOS_ANY_VERSION, &applied), DYFOS_STATUS_UNKNOWN_MAP);
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, clear, 0, &applied), DYFOS_STATUS_OK);
   EXPECT_TRUE(applied == 1);
+  /* The old spelling is refused with the kind's new name and an example of it. */
+  EXPECT(dyfos_client_apply(client, 0, tiny_map, "[\"Clear\"]", DYFOS_ANY_VERSION, &applied),
+         DYFOS_STATUS_MALFORMED_DELTA);
+  EXPECT_TRUE(dyfos_last_error(message, sizeof message) > 0 && strstr(message, "deltas[0]") != NULL &&
+              strstr(message, "a valid clear: {\"clear\": {}}") != NULL);
   /* A request zeroed with {0} asks for any version (the map is at 1 now). */
   {
     dyfos_rendezvous_request zeroed = {0};
@@ -295,6 +302,13 @@ int main(int argc, char **argv) {
     zeroed.has_expected_version = 2;
     EXPECT(dyfos_client_check(client, 0, &zeroed, NULL), DYFOS_STATUS_INVALID_ARGUMENT);
   }
+  const char *deltas_path = getenv("DYFOS_TEST_DELTAS");
+  if (deltas_path) {
+    char *deltas = read_file(deltas_path);
+    EXPECT_TRUE(deltas != NULL);
+    if (deltas) EXPECT(dyfos_client_apply(client, 0, tiny_map, deltas, 1, &applied), DYFOS_STATUS_OK);
+    free(deltas);
+  }
   char *snapshot = NULL;
   EXPECT(dyfos_client_snapshot(client, 0, tiny_map, &snapshot), DYFOS_STATUS_OK);
   if (snapshot) printf("--- snapshot %llu\n%s\n", (unsigned long long)tiny_map, snapshot);
@@ -307,12 +321,12 @@ int main(int argc, char **argv) {
   {
     uint64_t counted = tiny_map + 2, at = 99;
     EXPECT(dyfos_client_create_map(client, 0, counted, tiny, 0.7, 2.1, NULL), DYFOS_STATUS_OK);
-    EXPECT(dyfos_client_apply(client, 0, counted, "[\"Clear\", \"Clear\", \"Clear\"]", 0, &at), DYFOS_STATUS_OK);
+    EXPECT(dyfos_client_apply(client, 0, counted, "[{\"clear\": {}}, {\"clear\": {}}, {\"clear\": {}}]", 0, &at), DYFOS_STATUS_OK);
     EXPECT_TRUE(at == 3);
     EXPECT(dyfos_client_apply(client, 0, counted, "[]", 3, &at), DYFOS_STATUS_OK);
     EXPECT_TRUE(at == 3); /* an empty batch changes nothing */
     EXPECT(dyfos_client_apply(client, 0, counted,
-                              "[{\"SetSun\": {\"elevation\": 0.5, \"azimuth\": 1.0}}, \"Clear\"]", 3, &at),
+                              "[{\"set_sun\": {\"elevation\": 0.5, \"azimuth\": 1.0}}, {\"clear\": {}}]", 3, &at),
            DYFOS_STATUS_OK);
     EXPECT_TRUE(at == 5);
     EXPECT(dyfos_client_delete_map(client, 0, counted, 4), DYFOS_STATUS_MAP_VERSION_MISMATCH);
@@ -412,7 +426,7 @@ int main(int argc, char **argv) {
    * uploads anew at version 0. */
   {
     uint64_t at = 99, replaced = 99, id = 0;
-    EXPECT(dyfos_client_apply(client, 0, map, "[{\"SetSun\": {\"elevation\": 0.3, \"azimuth\": 1.0}}]", version,
+    EXPECT(dyfos_client_apply(client, 0, map, "[{\"set_sun\": {\"elevation\": 0.3, \"azimuth\": 1.0}}]", version,
                               &at),
            DYFOS_STATUS_OK);
     EXPECT_TRUE(at == version + 1);

@@ -97,7 +97,8 @@ Vector = Union[Sequence[float], Any]
 Matrix = Union[Sequence[Sequence[float]], Any]
 #: A scenario (SPEC §11): a path, JSON text or a dict.
 ScenarioLike = Union[str, "_os.PathLike[str]", Mapping[str, Any]]
-#: Map deltas as in ``dyfos map apply`` files: a list of dicts, JSON text or a path.
+#: Map deltas as in ``dyfos map apply`` files (``docs/deltas.md``): a list of dicts such as
+#: ``{"remove_obstacle": {"id": 3}}``, JSON text or a path.
 DeltasLike = Union[Sequence[Mapping[str, Any]], str, "_os.PathLike[str]"]
 #: Seconds, or a :class:`datetime.timedelta`.
 Seconds = Union[float, _dt.timedelta]
@@ -466,7 +467,8 @@ class Client:
         """Makes sure the daemon holds the map of a SPEC §11 scenario and returns its id.
 
         Args:
-            scenario: a path to a scenario file, its JSON text, or the dict.
+            scenario: a path to a scenario file, its JSON text, or the dict; or a map as
+                :meth:`snapshot` returns it (any object without ``rover``).
             map_id: the id to use; by default one derived from the map's content, so
                 uploading the same scenario again reuses its map (as ``dyfos query``).
             replace: if ``map_id`` holds other content, replace it (else ``map_exists``).
@@ -492,8 +494,8 @@ class Client:
     ) -> int:
         """Creates (or, with ``replace``, replaces) map ``map_id`` from an OctoMap
         ``.bt`` file (``OcTree::writeBinary``, octomap_server's saved maps) and returns
-        its version. Update it later with :meth:`apply` and ``SetVoxels`` /
-        ``SetVoxelBlocks`` deltas of the same resolution and origin.
+        its version. Update it later with :meth:`apply` and ``set_voxels`` /
+        ``set_voxel_blocks`` deltas of the same resolution and origin.
 
         Args:
             octomap: the ``.bt`` file's path, or its bytes.
@@ -601,20 +603,36 @@ class Client:
         batch changes nothing).
 
         Args:
-            deltas: as in ``dyfos map apply`` files, e.g. ``[{"RemoveObstacle": {"id": 3}},
-                {"SetSun": {"elevation": 0.5, "azimuth": 1.0}}]``; a list, JSON text or a path.
+            deltas: as in ``dyfos map apply`` files (``docs/deltas.md``): a list, JSON text
+                or a path. Each delta is a dict with one key, its kind; obstacles, voxels,
+                sun and bounds are written as in a scenario::
+
+                    {"upsert_obstacle": {"id": 1, "cylinder": {"x": 2.0, "y": 1.0, "radius": 0.5, "height": 10.0}}}
+                    {"upsert_obstacle": {"id": 2, "box": {"min": [4.0, 4.0, 0.0], "max": [5.0, 6.0, 3.0]}}}
+                    {"remove_obstacle": {"id": 2}}
+                    {"set_voxels": {"resolution": 0.1, "origin": [0.0, 0.0, 0.0], "occupied": [[1, 2, 3]]}}
+                    {"set_voxels": {"resolution": 0.1, "origin": [0.0, 0.0, 0.0], "free": [[1, 2, 3]]}}
+                    {"set_voxel_blocks": {"resolution": 0.1, "origin": [0.0, 0.0, 0.0],
+                                          "occupied": [{"min": [0, 0, 4], "mask": 7}]}}
+                    {"set_sun": {"elevation": 0.5, "azimuth": 1.0}}
+                    {"set_bounds": [-20.0, -20.0, 20.0, 20.0]}
+                    {"clear": {}}
+
             expected_version: the map must be at this version first (else
                 :class:`MapVersionMismatchError`); ``None`` accepts any.
 
         Raises:
-            InvalidRequestError: ``malformed_delta`` / ``invalid_delta`` (``.index`` is
-                the failing delta); the map is unchanged.
+            InvalidRequestError: ``malformed_delta`` (not of that form: ``.detail`` names
+                the field and shows a valid example of its kind) / ``invalid_delta`` (a
+                value the map refuses); ``.index`` is the failing delta; the map is unchanged.
         """
         return self._raw.apply(map_id, _deltas_json(deltas), expected_version, _seconds(timeout, "timeout"))
 
     def snapshot(self, map_id: int, timeout: Optional[Seconds] = None) -> Dict[str, Any]:
         """The map as it is now, as ``dyfos map snapshot`` prints it: ``map``, ``version``,
-        ``bounds``, ``sun``, ``obstacles`` (scenario form) and ``voxels`` if any."""
+        then ``bounds``, ``sun``, ``obstacles`` and ``voxels`` (if any) as a scenario writes
+        them. :meth:`upload_scenario` takes it back; each obstacle is a valid
+        ``upsert_obstacle`` value."""
         return self._raw.snapshot(map_id, _seconds(timeout, "timeout"))
 
     def delete_map(

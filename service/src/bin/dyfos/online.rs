@@ -6,6 +6,7 @@ use crate::offline::{load_scenario, parse_algorithm};
 use anyhow::anyhow;
 use dyfos_client::prelude::*;
 use dyfos_client::{MapRequestError, RendezvousError};
+use dyfos_shared::map_json::{deltas_from_json, map_to_json, world_from_json_with_files};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -80,14 +81,13 @@ pub enum MapCommand {
         #[command(flatten)]
         daemon: DaemonArgs,
     },
-    /// Upload a scenario file's map (bounds, sun, obstacles, voxels).
-    /// Upload a scenario file's map (bounds, sun, obstacles, voxels or octomap), or an
-    /// OctoMap `.bt` file as the map's occupied cells (`--octomap` with `--bounds` and
-    /// `--sun`).
+    /// Upload a scenario file's map (bounds, sun, obstacles, voxels or octomap), a map
+    /// as `dyfos map snapshot` prints it, or an OctoMap `.bt` file as the map's
+    /// occupied cells (`--octomap` with `--bounds` and `--sun`).
     Upload {
         /// Map id.
         id: MapId,
-        /// Scenario file.
+        /// Scenario file, or a map file (a snapshot: any JSON object without `rover`).
         #[arg(required_unless_present = "octomap")]
         scenario: Option<PathBuf>,
         /// An OctoMap `.bt` file (type `OcTree`) whose occupied cells are the map.
@@ -109,8 +109,8 @@ pub enum MapCommand {
         #[command(flatten)]
         daemon: DaemonArgs,
     },
-    /// Apply a JSON array of map deltas atomically, e.g.
-    /// `[{"RemoveObstacle": {"id": 3}}, {"SetSun": {"elevation": 0.5, "azimuth": 1.0}}]`.
+    /// Apply a JSON array of map deltas atomically (docs/deltas.md), e.g.
+    /// `[{"remove_obstacle": {"id": 3}}, {"set_sun": {"elevation": 0.5, "azimuth": 1.0}}]`.
     Apply {
         /// Map id.
         id: MapId,
@@ -122,7 +122,8 @@ pub enum MapCommand {
         #[command(flatten)]
         daemon: DaemonArgs,
     },
-    /// Print a map as JSON.
+    /// Print a map as JSON: `map`, `version` and a scenario's map fields
+    /// (docs/deltas.md); `dyfos map upload` takes it back.
     Snapshot {
         /// Map id.
         id: MapId,
@@ -214,7 +215,7 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
         }
         MapCommand::Upload { id, scenario, octomap, origin, bounds, sun, replace, daemon } => {
             let world = match (scenario, octomap) {
-                (Some(scenario), _) => load_scenario(scenario)?.world,
+                (Some(file), _) => map_file_world(file)?,
                 (None, Some(file)) => octomap_world(file, origin.as_deref(), bounds.as_deref(), sun.as_deref())?,
                 (None, None) => return Err(Failure::invalid(anyhow!("give a scenario file or --octomap FILE.bt"))),
             };
@@ -225,8 +226,7 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
         MapCommand::Apply { id, deltas, expected_version, daemon } => {
             let text = std::fs::read_to_string(deltas)
                 .map_err(|e| Failure::invalid(anyhow!("cannot read {}: {e}", deltas.display())))?;
-            let batch: Vec<MapDelta> = serde_json::from_str(&text)
-                .map_err(|e| Failure::invalid(anyhow!("{}: not a JSON array of map deltas: {e}", deltas.display())))?;
+            let batch = deltas_from_json(&text).map_err(|e| Failure::invalid(anyhow!("{}: {e}", deltas.display())))?;
             let version =
                 daemon.connect()?.apply(*id, *expected_version, &batch, daemon.timeout()?).map_err(map_failure)?;
             crate::print_json(&serde_json::json!({"map": id, "version": version}));
@@ -253,11 +253,7 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
         }
         MapCommand::Snapshot { id, bt: None, daemon } => {
             let world = daemon.connect()?.snapshot(*id, daemon.timeout()?).map_err(map_failure)?;
-            let mut json = serde_json::json!({"map": id});
-            if let (Some(out), serde_json::Value::Object(fields)) = (json.as_object_mut(), world.to_json()) {
-                out.extend(fields);
-            }
-            crate::print_json(&json);
+            crate::print_json(&map_to_json(Some(*id), &world));
         }
         MapCommand::Delete { id, expected_version, daemon } => {
             daemon.connect()?.delete_map(*id, *expected_version, daemon.timeout()?).map_err(map_failure)?;
@@ -265,6 +261,18 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
         }
     }
     Ok(())
+}
+
+/// The world of `dyfos map upload ID FILE`: a scenario's map if the file has a
+/// `rover`, else a map as `dyfos map snapshot` prints it (its `map` and `version`
+/// are not used: the daemon numbers its own versions). Every problem is exit code 2.
+fn map_file_world(file: &std::path::Path) -> Result<World, Failure> {
+    let text =
+        std::fs::read_to_string(file).map_err(|e| Failure::invalid(anyhow!("cannot read {}: {e}", file.display())))?;
+    // An `octomap.file` is relative to the scenario's folder (SPEC §11).
+    let folder = file.parent().unwrap_or(std::path::Path::new("."));
+    let read = |name: &str| std::fs::read(folder.join(name)).map_err(|e| format!("cannot read `{name}`: {e}"));
+    world_from_json_with_files(&text, read).map_err(|e| Failure::invalid(anyhow!("{}: {e}", file.display())))
 }
 
 /// The world of `dyfos map upload --octomap`: the file's occupied cells as voxels
