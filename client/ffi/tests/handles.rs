@@ -82,7 +82,8 @@ fn free_waits_for_the_call_another_thread_has_in_progress() {
         let finished = Arc::clone(&finished);
         std::thread::spawn(move || {
             // A call that lasts: an exhaustive search, made slow by many target points
-            // per candidate, stopped by a deadline.
+            // per candidate, stopped by a deadline if it has not finished by then (how
+            // long it takes depends on the machine and its load).
             let params =
                 dyfos_params { perimeter_points: 512, set: params.set | DYFOS_PARAM_PERIMETER_POINTS, ..params };
             let request = dyfos_rendezvous_request {
@@ -108,7 +109,8 @@ fn free_waits_for_the_call_another_thread_has_in_progress() {
     assert_eq!(unsafe { dyfos_client_free(handle(token)) }, DYFOS_STATUS_OK, "{}", last_error());
     assert!(finished.load(Ordering::SeqCst), "dyfos_client_free returned while the other thread's call still ran");
     let (status, stop) = call.join().expect("the calling thread");
-    assert_eq!((status, stop), (DYFOS_STATUS_OK, DYFOS_STOP_DEADLINE), "the call finished with its answer");
+    assert_eq!(status, DYFOS_STATUS_OK, "the call finished with its answer");
+    assert!(matches!(stop, DYFOS_STOP_FINISHED | DYFOS_STOP_DEADLINE), "the search ran to its end or deadline: {stop}");
     assert_eq!(stats(token), DYFOS_STATUS_NULL_PARAMETER, "the handle is freed");
 }
 
