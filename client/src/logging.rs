@@ -14,7 +14,9 @@
 //! - each kind of line (its call site and its text with every number, and every word
 //!   with a digit in it, taken out) is written at most [`BURST`] times per [`WINDOW`];
 //! - all of them together write at most [`BUDGET`] bytes per window, however many
-//!   kinds there are;
+//!   kinds there are; past it, only the first line of each call site (a place in
+//!   the code, whatever its text) is written, so that the process still says what
+//!   it did itself (`link stopped …`) while a stranger's garbage fills the budget;
 //! - the rest are counted, and once the window is over a few lines say how many were
 //!   left out, e.g. `… 128 more in the last 10 s like: rendezvous receive failed:
 //!   ExceedsMaxBorrows`: the [`SUMMARIES`] most frequent kinds one by one, the others
@@ -22,7 +24,8 @@
 //! - every field is cut at [`FIELD_LIMIT`] bytes (iceoryx2 prints a port's whole
 //!   state, about 5 KB, with each of its warnings).
 //!
-//! So a window writes at most [`BUDGET`] bytes plus [`SUMMARIES`] + 2 summary lines.
+//! So a window writes at most [`BUDGET`] bytes, one line per call site that spoke
+//! past it, and [`SUMMARIES`] + 2 summary lines.
 //! `debug` and `trace`, for troubleshooting, log everything. [`counters`] tells how
 //! many lines were seen and left out (`dyfos stats` shows them); [`flush`] writes the
 //! summary of the window still open, for a process about to exit.
@@ -234,14 +237,15 @@ fn cut(text: &mut String, limit: usize) {
     }
 }
 
-/// The kind of a line: its call site and its message with every word that holds a
-/// digit (a number, a hex id, a payload) made one `#`, so that ids, counts and
-/// quoted bytes do not make each line a kind of its own.
-fn kind_of(event: &Event<'_>, message: &str) -> u64 {
+/// The call site of a line, and its kind: the call site and its message with
+/// every word that holds a digit (a number, a hex id, a payload) made one `#`, so
+/// that ids, counts and quoted bytes do not make each line a kind of its own.
+fn site_and_kind(event: &Event<'_>, message: &str) -> (u64, u64) {
     let mut h = std::collections::hash_map::DefaultHasher::new();
     event.metadata().callsite().hash(&mut h);
+    let site = h.finish();
     hash_text(message, &mut h);
-    h.finish()
+    (site, h.finish())
 }
 
 fn hash_text(message: &str, h: &mut impl Hasher) {
@@ -291,6 +295,8 @@ struct Kind {
 struct Window {
     start: Instant,
     kinds: HashMap<u64, Kind>,
+    /// Call sites that wrote a line in this window.
+    sites: std::collections::HashSet<u64>,
     bytes: usize,
     /// Lines left out only because the byte budget was spent, and their bytes.
     over_budget: (u64, u64),
@@ -298,7 +304,7 @@ struct Window {
 
 impl Window {
     fn new(start: Instant) -> Self {
-        Window { start, kinds: HashMap::new(), bytes: 0, over_budget: (0, 0) }
+        Window { start, kinds: HashMap::new(), sites: Default::default(), bytes: 0, over_budget: (0, 0) }
     }
 
     /// The summary lines of what this window left out: the most frequent kinds one
@@ -349,8 +355,16 @@ struct RateLimit {
 }
 
 impl RateLimit {
-    /// Whether a line of this kind and size may be written at `now`; counts it if not.
-    fn admit(&self, kind: u64, level: Level, bytes: usize, message: impl FnOnce() -> String, now: Instant) -> bool {
+    /// Whether a line of this call site, kind and size may be written at `now`;
+    /// counts it if not.
+    fn admit(
+        &self,
+        (site, kind): (u64, u64),
+        level: Level,
+        bytes: usize,
+        message: impl FnOnce() -> String,
+        now: Instant,
+    ) -> bool {
         let mut state = self.state.lock().unwrap_or_else(|p| p.into_inner());
         let state = &mut *state;
         if state.window.as_ref().is_some_and(|w| now.duration_since(w.start) >= WINDOW)
@@ -367,9 +381,13 @@ impl RateLimit {
             sample: String::new(),
         });
         if k.written < BURST {
-            if window.bytes + bytes <= BUDGET {
+            // Past the budget, a call site's first line in the window still goes:
+            // there are as many as places in the code, whatever a peer sends.
+            let first_of_site = window.sites.len() < MAX_KINDS && !window.sites.contains(&site);
+            if window.bytes + bytes <= BUDGET || first_of_site {
                 k.written += 1;
                 window.bytes += bytes;
+                window.sites.insert(site);
                 return true;
             }
             window.over_budget.0 += 1;
@@ -426,7 +444,7 @@ impl<S: Subscriber> Layer<S> for RateLimit {
         }
         let mut line = Line { message: String::new(), bytes: LINE_OVERHEAD + meta.target().len() };
         event.record(&mut line);
-        let kind = kind_of(event, &line.message);
+        let kind = site_and_kind(event, &line.message);
         self.admit(kind, level, line.bytes, || line.message.clone(), Instant::now())
     }
 }
@@ -459,10 +477,10 @@ mod tests {
     fn a_kind_is_written_burst_times_per_window_then_summarised() {
         let limit = RateLimit::default();
         let t0 = Instant::now();
-        let admitted = (0..100).filter(|_| limit.admit(1, Level::WARN, 100, || "flood".into(), t0)).count();
+        let admitted = (0..100).filter(|_| limit.admit((1, 1), Level::WARN, 100, || "flood".into(), t0)).count();
         assert_eq!(admitted, BURST as usize);
         // Another kind is not held back by the first.
-        assert!(limit.admit(2, Level::WARN, 100, || "other".into(), t0));
+        assert!(limit.admit((2, 2), Level::WARN, 100, || "other".into(), t0));
         let left_out = limit.state.lock().unwrap().window.as_ref().unwrap().kinds[&1].left_out;
         assert_eq!(left_out, 100 - u64::from(BURST));
         // Before the window is over nothing is summarised; after, the window goes.
@@ -471,7 +489,7 @@ mod tests {
         limit.flush(t0 + WINDOW, false);
         assert!(limit.state.lock().unwrap().window.is_none());
         // A new window writes again.
-        assert!(limit.admit(1, Level::WARN, 100, || "flood".into(), t0 + WINDOW));
+        assert!(limit.admit((1, 1), Level::WARN, 100, || "flood".into(), t0 + WINDOW));
     }
 
     #[test]
@@ -480,20 +498,24 @@ mod tests {
         let t0 = Instant::now();
         let line = 300;
         let mut written = 0;
+        // One call site, 2000 texts.
         for kind in 0..2_000u64 {
-            if limit.admit(kind, Level::WARN, line, || format!("kind {kind}"), t0) {
+            if limit.admit((7, kind), Level::WARN, line, || format!("kind {kind}"), t0) {
                 written += line;
             }
         }
         assert!(written <= BUDGET && written + line > BUDGET, "{written} bytes written");
         let over = limit.state.lock().unwrap().window.as_ref().unwrap().over_budget;
         assert_eq!(over.0, 2_000 - (written / line) as u64, "every line past the budget is counted");
+        // Another call site still says its first line, once.
+        assert!(limit.admit((8, 1), Level::INFO, line, || "stopped".into(), t0));
+        assert!(!limit.admit((8, 2), Level::INFO, line, || "stopped again".into(), t0));
         // The next window has a budget of its own; the summaries of the last one
         // are few, count every line left out and say why.
-        assert!(limit.admit(5, Level::WARN, line, || "again".into(), t0 + WINDOW));
+        assert!(limit.admit((7, 5), Level::WARN, line, || "again".into(), t0 + WINDOW));
         let due = std::mem::take(&mut limit.state.lock().unwrap().due);
         assert_eq!(due.len(), SUMMARIES + 2, "{due:#?}");
-        assert_eq!(left_out_in(due.iter().map(|(_, s)| s.as_str())), over.0, "{due:#?}");
+        assert_eq!(left_out_in(due.iter().map(|(_, s)| s.as_str())), over.0 + 1, "{due:#?}");
         assert!(due[SUMMARIES].1.contains(" other kinds, e.g.: "), "{:?}", due[SUMMARIES]);
         assert!(due[SUMMARIES + 1].1.contains("budget"), "{:?}", due[SUMMARIES + 1]);
     }
@@ -551,20 +573,30 @@ mod tests {
         let (limit, subscriber) = test_log(&out, &[]);
         let lines = 5_000;
         tracing::subscriber::with_default(subscriber, || {
-            for i in 0..lines {
+            let mut x = 1u64;
+            for _ in 0..lines {
                 // Letters only, so that every line is a kind of its own.
-                let garbage: String = (0..150).map(|k| (b'a' + ((i * 7 + k * 13) % 26) as u8) as char).collect();
+                let garbage: String = (0..150)
+                    .map(|_| {
+                        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                        (b'a' + (x >> 59) as u8 % 26) as char
+                    })
+                    .collect();
                 tracing::error!(target: "zenoh_codec", "invalid frame from peer: {garbage} (field ({garbage}))");
             }
+            // The process's own line, past the budget, from a call site of its own.
+            tracing::info!(target: "dyfos_link", "link stopped");
             limit.flush(Instant::now(), true);
         });
         let text = out.text();
         let (summaries, written): (Vec<&str>, Vec<&str>) = text.lines().partition(|l| l.contains(SUMMARY_TARGET));
+        assert!(written.last().is_some_and(|l| l.ends_with("link stopped")), "{written:#?}");
         let written_bytes: usize = written.iter().map(|l| l.len() + 1).sum();
-        assert!(written_bytes <= BUDGET, "{written_bytes} bytes of lines written");
+        assert!(written_bytes <= BUDGET + 100, "{written_bytes} bytes of lines written");
         assert!(written.len() > 10, "only {} lines written", written.len());
         assert_eq!(summaries.len(), SUMMARIES + 2, "{summaries:#?}");
-        assert_eq!(left_out_in(summaries.iter().copied()), lines as u64 - written.len() as u64, "{summaries:#?}");
+        let all = lines as u64 + 1;
+        assert_eq!(left_out_in(summaries.iter().copied()), all - written.len() as u64, "{summaries:#?}");
         let summary_bytes: usize = summaries.iter().map(|l| l.len() + 1).sum();
         assert!(summary_bytes < (SUMMARIES + 2) * (FIELD_LIMIT + 150), "{summary_bytes} bytes of summaries");
     }
