@@ -430,6 +430,9 @@ const SIM: &str = "sim";
 /// Where the links announce themselves: `dyfos/link/v<version>/<mission>/<side>/<zenoh id>`.
 const HELLO: &str = "dyfos/link";
 
+/// Most mismatched peers a link remembers having named.
+const MAX_TOLD: usize = 64;
+
 /// What the other host's link said of itself, and what is wrong with it for this one.
 fn hello_mismatch(key: &str, mission: &str, side: Side) -> Option<(String, String)> {
     let rest = key.strip_prefix(HELLO)?.strip_prefix('/')?;
@@ -551,9 +554,10 @@ impl Link {
                 if sample.kind() != zenoh::sample::SampleKind::Put || key.ends_with(&format!("/{zid}")) {
                     return;
                 }
-                if let Some((what, why)) = hello_mismatch(key, &mission, side)
-                    && told.lock().unwrap_or_else(|p| p.into_inner()).insert(what)
-                {
+                let Some((what, why)) = hello_mismatch(key, &mission, side) else { return };
+                let mut told = told.lock().unwrap_or_else(|p| p.into_inner());
+                // Bounded: without credentials anyone may announce anything.
+                if told.len() < MAX_TOLD && told.insert(what) {
                     tracing::warn!("{why}");
                 }
             })
@@ -768,6 +772,22 @@ mod tests {
             viewer: None,
             predicted_cost: None,
         }
+    }
+
+    #[test]
+    fn a_peer_of_another_mission_side_or_version_is_told_apart() {
+        let hello = |v: &str, m: &str, side: &str| format!("{HELLO}/{v}/{m}/{side}/0123abcd");
+        let v = format!("v{LINK_VERSION}");
+        assert_eq!(hello_mismatch(&hello(&v, "m1", "viewer"), "m1", Side::Rover), None);
+        let (what, why) = hello_mismatch(&hello(&v, "m2", "viewer"), "m1", Side::Rover).unwrap();
+        assert!(why.contains("serves mission `m2`, this one `m1`"), "{why}");
+        assert_eq!(what, format!("{v}/m2/viewer"));
+        let (_, why) = hello_mismatch(&hello(&v, "m1", "rover"), "m1", Side::Rover).unwrap();
+        assert!(why.contains("on the rover's side too"), "{why}");
+        let (_, why) = hello_mismatch(&hello("v9", "m1", "viewer"), "m1", Side::Rover).unwrap();
+        assert!(why.contains("link version 9"), "{why}");
+        assert_eq!(hello_mismatch("dyfos/linked/v1/m1/viewer/x", "m1", Side::Rover), None);
+        assert_eq!(hello_mismatch(&format!("{HELLO}/{v}/m1"), "m1", Side::Rover), None);
     }
 
     #[test]
