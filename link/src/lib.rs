@@ -35,6 +35,18 @@
 //! rate-limited log. Zenoh publishes reliably and blocks rather than drop under a
 //! burst, and reconnects by itself after the link comes back.
 //!
+//! At the goal the rover waits for each reader of its estimates to acknowledge its
+//! last sample; across hosts its reader is its link, so the viewer's link
+//! acknowledges for the evaluations on its host ([`evaluations`]).
+//!
+//! Each link announces itself to the other (a Zenoh liveliness token
+//! `dyfos/link/v<version>/<mission>/<side>/<zenoh id>`): a peer with the right
+//! credentials but another mission, the same side or another link version is
+//! named in the log, once. Connections that do not complete Zenoh's handshake
+//! within [`HANDSHAKE_TIMEOUT`] are closed, and at most [`PENDING_HANDSHAKES`] may
+//! be pending at once, so that a host holding connections open cannot keep the
+//! other robot's link out; [`health`] counts and reports them.
+//!
 //! Security is Zenoh's own: with [`LinkConfig::credentials`] (a file of one
 //! `user:password` line, the same on both hosts) each side presents the mission's
 //! user and password and accepts only peers that present them (Zenoh user/password
@@ -45,24 +57,41 @@
 //! TLS transport, `transport_tls`, not built here).
 #![warn(missing_docs)]
 
-use dyfos_client::mission::topics::{MAX_BUFFER, TopicOpenError, Topics, TopicsConfig};
+pub mod evaluations;
+pub mod health;
+
+use dyfos_client::mission::topics::{MAX_BUFFER, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
 use dyfos_shared::wire::mission::{
     Ack, AckMsg, ESTIMATE_TOPIC, EVALUATION_TOPIC, Estimate, EstimateMsg, EvaluationAckMsg, MEASUREMENT_TOPIC,
-    Measurement, MeasurementMsg, PresenceMsg, RENDEZVOUS_TOPIC, ROVER_ACK_TOPIC, ROVER_PRESENCE_TOPIC, RendezvousState,
-    RendezvousStateMsg, TRUTH_TOPIC, TrueState, TrueStateMsg, VIEWER_ACK_TOPIC, VIEWER_PRESENCE_TOPIC,
+    Measurement, MeasurementMsg, Phase, PresenceMsg, RENDEZVOUS_TOPIC, ROVER_ACK_TOPIC, ROVER_PRESENCE_TOPIC,
+    RendezvousState, RendezvousStateMsg, TRUTH_TOPIC, TrueState, TrueStateMsg, VIEWER_ACK_TOPIC, VIEWER_PRESENCE_TOPIC,
 };
+use evaluations::Evaluations;
 use iceoryx2::prelude::ZeroCopySend;
 use serde::{Deserialize, Serialize, de::DeserializeOwned};
+use std::collections::HashSet;
 use std::fmt::Debug;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 use zenoh::Wait;
 
 /// Version of the link's frames; a frame of another version is dropped.
 pub const LINK_VERSION: u16 = 1;
+
+/// Longest a connection may take to complete Zenoh's handshake (two round trips
+/// and the user/password challenge; room for a radio with a few hundred ms of
+/// round trip) before it is closed, on both sides: a listener does not keep a
+/// silent connection, a connecting side does not wait on a stalled one.
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Most connections whose handshake may be pending at once; more are closed at
+/// once. Far above what a mission needs (one peer), so that a host must hold this
+/// many connections open, renewing each within [`HANDSHAKE_TIMEOUT`], to keep the
+/// other robot out; and below the usual limit of 1024 open files.
+pub const PENDING_HANDSHAKES: usize = 512;
 
 /// Largest frame accepted, bytes (the largest message is about 200).
 pub const MAX_FRAME: usize = 4096;
@@ -318,13 +347,21 @@ pub fn zenoh_config(config: &LinkConfig) -> Result<zenoh::Config, LinkStartError
     for (key, value) in [
         ("mode", "\"peer\"".to_string()),
         ("scouting/multicast/enabled", "false".into()),
-        ("scouting/gossip/enabled", "false".into()),
+        // Gossip on but inert (it sends to no one and connects to no one): with it
+        // off, Zenoh warns at every start that it cannot de-duplicate data across
+        // region gateways, which two peers do not have.
+        ("scouting/gossip", "{enabled: true, multihop: false, target: [], autoconnect: []}".into()),
+        // Open returns at once; the other host may come later.
+        ("open/return_conditions/connect_scouted", "false".into()),
         ("listen/endpoints", json(&config.listen)),
         ("connect/endpoints", json(&config.connect)),
         ("connect/timeout_ms", "-1".into()),
         ("connect/exit_on_failure", "false".into()),
         ("connect/retry", "{period_init_ms: 250, period_max_ms: 1000, period_increase_factor: 2}".into()),
         ("transport/link/tx/lease", lease.to_string()),
+        ("transport/unicast/accept_timeout", HANDSHAKE_TIMEOUT.as_millis().to_string()),
+        ("transport/unicast/open_timeout", HANDSHAKE_TIMEOUT.as_millis().to_string()),
+        ("transport/unicast/accept_pending", PENDING_HANDSHAKES.to_string()),
     ] {
         c.insert_json5(key, &value).map_err(zerr)?;
     }
@@ -346,14 +383,17 @@ pub fn zenoh_config(config: &LinkConfig) -> Result<zenoh::Config, LinkStartError
         } else {
             r#"{ id: "crew" }"#.to_string()
         };
+        let hello = serde_json_list(&[format!("{HELLO}/**")]);
         let acl = format!(
             r#"{{
                 enabled: true,
                 default_permission: "deny",
                 rules: [{{ id: "mission", messages: ["put", "delete", "declare_subscriber"],
-                          flows: ["egress", "ingress"], permission: "allow", key_exprs: {keys} }}],
+                          flows: ["egress", "ingress"], permission: "allow", key_exprs: {keys} }},
+                        {{ id: "hello", messages: ["liveliness_token", "declare_liveliness_subscriber"],
+                          flows: ["egress", "ingress"], permission: "allow", key_exprs: {hello} }}],
                 subjects: [{subject}],
-                policies: [{{ rules: ["mission"], subjects: ["crew"] }}],
+                policies: [{{ rules: ["mission", "hello"], subjects: ["crew"] }}],
             }}"#
         );
         c.insert_json5("access_control", &acl).map_err(zerr)?;
@@ -374,6 +414,8 @@ pub struct Link {
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
     counters: Arc<Counters>,
+    /// This link's announcement to the other host, and what it hears of the other's.
+    _hello: Option<(zenoh::liveliness::LivelinessToken, zenoh::pubsub::Subscriber<()>)>,
 }
 
 impl Debug for Link {
@@ -385,25 +427,102 @@ impl Debug for Link {
 const MISSION: &str = "mission";
 const SIM: &str = "sim";
 
+/// Where the links announce themselves: `dyfos/link/v<version>/<mission>/<side>/<zenoh id>`.
+const HELLO: &str = "dyfos/link";
+
+/// Most mismatched peers a link remembers having named.
+const MAX_TOLD: usize = 64;
+
+/// What the other host's link said of itself, and what is wrong with it for this one.
+fn hello_mismatch(key: &str, mission: &str, side: Side) -> Option<(String, String)> {
+    let rest = key.strip_prefix(HELLO)?.strip_prefix('/')?;
+    let mut parts = rest.split('/');
+    let (version, peer_mission, peer_side) = (parts.next()?, parts.next()?, parts.next()?);
+    let why = if version != format!("v{LINK_VERSION}") {
+        format!(
+            "the other host's link speaks link version {}, this one {LINK_VERSION}: nothing crosses between them; run the same dyfos-link on both hosts",
+            version.trim_start_matches('v')
+        )
+    } else if peer_mission != mission {
+        format!(
+            "the other host's link serves mission `{peer_mission}`, this one `{mission}`: nothing crosses between them; give both links, the rover and the viewer the same --mission-name"
+        )
+    } else if peer_side == side.name() {
+        format!(
+            "the other host's link is on the {peer_side}'s side too: start one link with --side rover and the other with --side viewer"
+        )
+    } else {
+        return None;
+    };
+    Some((format!("{version}/{peer_mission}/{peer_side}"), why))
+}
+
+/// How a message read on this host goes onto the link: `None` keeps it here.
+type Pass<T> = Box<dyn FnMut(T) -> Option<T> + Send>;
+
+/// How a message from the link is handed to this host's readers; returns how many got it.
+type Hand<T> = Box<dyn FnMut(&Outbox<T>, T) -> Result<usize, TopicSendError> + Send>;
+
 impl Link {
     /// Opens the Zenoh session and starts forwarding: one thread per topic and
     /// direction. Returns once every port is open (the other host may come later).
     pub fn start(config: &LinkConfig) -> Result<Self, LinkStartError> {
         let zconfig = zenoh_config(config)?;
-        let session = zenoh::open(zconfig).wait().map_err(|e| LinkStartError::Zenoh(e.to_string()))?;
-        let mut link =
-            Link { session, stop: Arc::new(AtomicBool::new(false)), threads: Vec::new(), counters: Arc::default() };
+        let zerr = |e: zenoh::Error| LinkStartError::Zenoh(e.to_string());
+        let session = zenoh::open(zconfig).wait().map_err(zerr)?;
+        let mut link = Link {
+            session,
+            stop: Arc::new(AtomicBool::new(false)),
+            threads: Vec::new(),
+            counters: Arc::default(),
+            _hello: None,
+        };
+        link._hello = Some(link.hello(config).map_err(zerr)?);
         let rover_side = config.side == Side::Rover;
-        // The rover's host sends the first five, the viewer's the last four.
+        // Each side sends its own topics: the rover's host rendezvous, estimates,
+        // acknowledgements, truth and the rover's heartbeat; the viewer's host
+        // measurements, acknowledgements, the evaluations' and the viewer's heartbeat.
         link.forward::<RendezvousStateMsg>(config, rover_side, MISSION, RENDEZVOUS_TOPIC)?;
-        link.forward::<EstimateMsg>(config, rover_side, MISSION, ESTIMATE_TOPIC)?;
-        link.forward::<PresenceMsg>(config, rover_side, MISSION, ROVER_PRESENCE_TOPIC)?;
         link.forward::<AckMsg>(config, rover_side, MISSION, ROVER_ACK_TOPIC)?;
         link.forward::<TrueStateMsg>(config, rover_side, SIM, TRUTH_TOPIC)?;
         link.forward::<MeasurementMsg>(config, !rover_side, MISSION, MEASUREMENT_TOPIC)?;
-        link.forward::<PresenceMsg>(config, !rover_side, MISSION, VIEWER_PRESENCE_TOPIC)?;
         link.forward::<AckMsg>(config, !rover_side, MISSION, VIEWER_ACK_TOPIC)?;
-        link.forward::<EvaluationAckMsg>(config, !rover_side, MISSION, EVALUATION_TOPIC)?;
+        if rover_side {
+            link.send_out::<EstimateMsg>(config, MISSION, ESTIMATE_TOPIC, Box::new(Some))?;
+            link.take_in::<EvaluationAckMsg>(config, MISSION, EVALUATION_TOPIC, Box::new(|o, m| o.send(m)))?;
+        } else {
+            // The evaluations on this host: the last estimate's readers, and their
+            // acknowledgements, answered for together.
+            let evaluations = Arc::new(Mutex::new(Evaluations::default()));
+            let key = key_expr(&config.topics.mission, MISSION, EVALUATION_TOPIC);
+            let answer = link.session.declare_publisher(key).wait().map_err(zerr)?;
+            let (mission, counters, e) = (config.topics.mission.clone(), link.counters.clone(), evaluations.clone());
+            let hand: Hand<EstimateMsg> = Box::new(move |outbox, msg| {
+                // Held while handing on, so that no acknowledgement comes before the count.
+                let mut e = e.lock().unwrap_or_else(|p| p.into_inner());
+                let readers = outbox.send(msg)?;
+                if Phase::try_from(msg.phase) == Ok(Phase::Finished)
+                    && let Some(ack) = e.finished(msg.sample, readers)
+                {
+                    match answer.put(encode(&mission, &ack)).wait() {
+                        Ok(()) => counters.sent.fetch_add(1, Ordering::Relaxed),
+                        Err(e) => {
+                            tracing::warn!("cannot acknowledge the rover's last sample: {e}");
+                            0
+                        }
+                    };
+                }
+                Ok(readers)
+            });
+            link.take_in::<EstimateMsg>(config, MISSION, ESTIMATE_TOPIC, hand)?;
+            let pass: Pass<EvaluationAckMsg> =
+                Box::new(move |ack| evaluations.lock().unwrap_or_else(|p| p.into_inner()).acknowledged(ack));
+            link.send_out::<EvaluationAckMsg>(config, MISSION, EVALUATION_TOPIC, pass)?;
+        }
+        // The heartbeats last: the rover and the viewer start their mission once
+        // they hear each other, and by then every other topic crosses.
+        link.forward::<PresenceMsg>(config, rover_side, MISSION, ROVER_PRESENCE_TOPIC)?;
+        link.forward::<PresenceMsg>(config, !rover_side, MISSION, VIEWER_PRESENCE_TOPIC)?;
         tracing::info!(
             side = config.side.name(),
             mission = %config.topics.mission,
@@ -416,7 +535,37 @@ impl Link {
         Ok(link)
     }
 
-    /// Starts the thread carrying `group/topic` outwards (`out`) or inwards.
+    /// Announces this link to the other host and names, once each, the ways in
+    /// which the other host's link does not match it.
+    fn hello(
+        &self,
+        config: &LinkConfig,
+    ) -> zenoh::Result<(zenoh::liveliness::LivelinessToken, zenoh::pubsub::Subscriber<()>)> {
+        let (mission, side, zid) = (config.topics.mission.clone(), config.side, self.session.zid().to_string());
+        let me = format!("{HELLO}/v{LINK_VERSION}/{mission}/{}/{zid}", side.name());
+        let token = self.session.liveliness().declare_token(me).wait()?;
+        let told = Mutex::new(HashSet::new());
+        let heard = self
+            .session
+            .liveliness()
+            .declare_subscriber(format!("{HELLO}/**"))
+            .callback(move |sample| {
+                let key = sample.key_expr().as_str();
+                if sample.kind() != zenoh::sample::SampleKind::Put || key.ends_with(&format!("/{zid}")) {
+                    return;
+                }
+                let Some((what, why)) = hello_mismatch(key, &mission, side) else { return };
+                let mut told = told.lock().unwrap_or_else(|p| p.into_inner());
+                // Bounded: without credentials anyone may announce anything.
+                if told.len() < MAX_TOLD && told.insert(what) {
+                    tracing::warn!("{why}");
+                }
+            })
+            .wait()?;
+        Ok((token, heard))
+    }
+
+    /// Starts the thread carrying `group/topic` outwards (`out`) or inwards, as is.
     fn forward<T: LinkMessage>(
         &mut self,
         config: &LinkConfig,
@@ -424,72 +573,113 @@ impl Link {
         group: &str,
         topic: &str,
     ) -> Result<(), LinkStartError> {
+        if out {
+            self.send_out::<T>(config, group, topic, Box::new(Some))
+        } else {
+            self.take_in::<T>(config, group, topic, Box::new(|outbox, msg| outbox.send(msg)))
+        }
+    }
+
+    /// Starts the thread reading `group/topic` on this host and putting what `pass`
+    /// lets through on the link.
+    fn send_out<T: LinkMessage>(
+        &mut self,
+        config: &LinkConfig,
+        group: &str,
+        topic: &str,
+        mut pass: Pass<T>,
+    ) -> Result<(), LinkStartError> {
         let mission = config.topics.mission.clone();
         let key = key_expr(&mission, group, topic);
-        let (topics_config, group, topic) = (config.topics.clone(), group.to_string(), topic.to_string());
         let (stop, counters, session) = (self.stop.clone(), self.counters.clone(), self.session.clone());
-        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), LinkStartError>>();
-        let name = format!("link-{}{topic}", if out { ">" } else { "<" });
-        let thread = std::thread::Builder::new()
-            .name(name)
-            .spawn(move || {
-                let topics = match Topics::open(&topics_config) {
-                    Ok(t) => t,
-                    Err(e) => {
-                        let _ = ready_tx.send(Err(e.into()));
-                        return;
+        let (group, name, topic) = (group.to_string(), format!("link->{topic}"), topic.to_string());
+        self.spawn(config, &name, move |topics, ready| {
+            let opened =
+                topics.inbox::<T>(&group, &topic, MAX_BUFFER).map_err(LinkStartError::from).and_then(|inbox| {
+                    session
+                        .declare_publisher(key.clone())
+                        .congestion_control(zenoh::qos::CongestionControl::Block)
+                        .express(true)
+                        .wait()
+                        .map(|p| (inbox, p))
+                        .map_err(|e| LinkStartError::Zenoh(e.to_string()))
+                });
+            let Some((inbox, publisher)) = announce(opened, ready) else { return };
+            while !stop.load(Ordering::Relaxed) {
+                let Some(msg) = inbox.recv_timeout(NAP, &|| stop.load(Ordering::Relaxed)) else { continue };
+                let Some(msg) = pass(msg) else { continue };
+                match publisher.put(encode(&mission, &msg)).wait() {
+                    Ok(()) => {
+                        counters.sent.fetch_add(1, Ordering::Relaxed);
                     }
+                    Err(e) => tracing::warn!(key = %key, "not sent: {e}"),
+                }
+            }
+        })
+    }
+
+    /// Starts the thread taking `group/topic` from the link and handing each valid
+    /// message to this host with `hand`.
+    fn take_in<T: LinkMessage>(
+        &mut self,
+        config: &LinkConfig,
+        group: &str,
+        topic: &str,
+        mut hand: Hand<T>,
+    ) -> Result<(), LinkStartError> {
+        let mission = config.topics.mission.clone();
+        let key = key_expr(&mission, group, topic);
+        let (stop, counters, session) = (self.stop.clone(), self.counters.clone(), self.session.clone());
+        let (group, name, topic) = (group.to_string(), format!("link-<{topic}"), topic.to_string());
+        self.spawn(config, &name, move |topics, ready| {
+            let opened = topics.outbox::<T>(&group, &topic).map_err(LinkStartError::from).and_then(|outbox| {
+                session
+                    .declare_subscriber(key.clone())
+                    .with(zenoh::handlers::FifoChannel::new(MAX_BUFFER))
+                    .wait()
+                    .map(|s| (outbox, s))
+                    .map_err(|e| LinkStartError::Zenoh(e.to_string()))
+            });
+            let Some((outbox, subscriber)) = announce(opened, ready) else { return };
+            while !stop.load(Ordering::Relaxed) {
+                let sample = match subscriber.recv_timeout(NAP) {
+                    Ok(Some(s)) => s,
+                    Ok(None) => continue,
+                    Err(_) => break,
                 };
-                if out {
-                    let opened =
-                        topics.inbox::<T>(&group, &topic, MAX_BUFFER).map_err(LinkStartError::from).and_then(|inbox| {
-                            session
-                                .declare_publisher(key.clone())
-                                .congestion_control(zenoh::qos::CongestionControl::Block)
-                                .express(true)
-                                .wait()
-                                .map(|p| (inbox, p))
-                                .map_err(|e| LinkStartError::Zenoh(e.to_string()))
-                        });
-                    let Some((inbox, publisher)) = announce(opened, &ready_tx) else { return };
-                    while !stop.load(Ordering::Relaxed) {
-                        let Some(msg) = inbox.recv_timeout(NAP, &|| stop.load(Ordering::Relaxed)) else { continue };
-                        match publisher.put(encode(&mission, &msg)).wait() {
-                            Ok(()) => {
-                                counters.sent.fetch_add(1, Ordering::Relaxed);
-                            }
-                            Err(e) => tracing::warn!(key = %key, "not sent: {e}"),
+                match decode::<T>(&mission, &sample.payload().to_bytes()) {
+                    Ok(msg) => match hand(&outbox, msg) {
+                        Ok(_) => {
+                            counters.received.fetch_add(1, Ordering::Relaxed);
                         }
+                        Err(e) => tracing::warn!("cannot hand on a message from the link: {e}"),
+                    },
+                    Err(e) => {
+                        counters.dropped.fetch_add(1, Ordering::Relaxed);
+                        tracing::warn!(key = %key, "dropped a message from the link: {e}");
                     }
-                } else {
-                    let opened = topics.outbox::<T>(&group, &topic).map_err(LinkStartError::from).and_then(|outbox| {
-                        session
-                            .declare_subscriber(key.clone())
-                            .with(zenoh::handlers::FifoChannel::new(MAX_BUFFER))
-                            .wait()
-                            .map(|s| (outbox, s))
-                            .map_err(|e| LinkStartError::Zenoh(e.to_string()))
-                    });
-                    let Some((outbox, subscriber)) = announce(opened, &ready_tx) else { return };
-                    while !stop.load(Ordering::Relaxed) {
-                        let sample = match subscriber.recv_timeout(NAP) {
-                            Ok(Some(s)) => s,
-                            Ok(None) => continue,
-                            Err(_) => break,
-                        };
-                        match decode::<T>(&mission, &sample.payload().to_bytes()) {
-                            Ok(msg) => match outbox.send(msg) {
-                                Ok(_) => {
-                                    counters.received.fetch_add(1, Ordering::Relaxed);
-                                }
-                                Err(e) => tracing::warn!("cannot hand on a message from the link: {e}"),
-                            },
-                            Err(e) => {
-                                counters.dropped.fetch_add(1, Ordering::Relaxed);
-                                tracing::warn!(key = %key, "dropped a message from the link: {e}");
-                            }
-                        }
-                    }
+                }
+            }
+        })
+    }
+
+    /// Runs `body` on a thread of its own with this host's topics (iceoryx2 ports
+    /// stay on the thread that made them); returns once it said whether its ports
+    /// opened.
+    fn spawn(
+        &mut self,
+        config: &LinkConfig,
+        name: &str,
+        body: impl FnOnce(Topics, &std::sync::mpsc::Sender<Result<(), LinkStartError>>) + Send + 'static,
+    ) -> Result<(), LinkStartError> {
+        let topics_config = config.topics.clone();
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), LinkStartError>>();
+        let thread = std::thread::Builder::new()
+            .name(name.to_string())
+            .spawn(move || match Topics::open(&topics_config) {
+                Ok(topics) => body(topics, &ready_tx),
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e.into()));
                 }
             })
             .map_err(|e| LinkStartError::Zenoh(format!("cannot start a thread: {e}")))?;
@@ -582,6 +772,22 @@ mod tests {
             viewer: None,
             predicted_cost: None,
         }
+    }
+
+    #[test]
+    fn a_peer_of_another_mission_side_or_version_is_told_apart() {
+        let hello = |v: &str, m: &str, side: &str| format!("{HELLO}/{v}/{m}/{side}/0123abcd");
+        let v = format!("v{LINK_VERSION}");
+        assert_eq!(hello_mismatch(&hello(&v, "m1", "viewer"), "m1", Side::Rover), None);
+        let (what, why) = hello_mismatch(&hello(&v, "m2", "viewer"), "m1", Side::Rover).unwrap();
+        assert!(why.contains("serves mission `m2`, this one `m1`"), "{why}");
+        assert_eq!(what, format!("{v}/m2/viewer"));
+        let (_, why) = hello_mismatch(&hello(&v, "m1", "rover"), "m1", Side::Rover).unwrap();
+        assert!(why.contains("on the rover's side too"), "{why}");
+        let (_, why) = hello_mismatch(&hello("v9", "m1", "viewer"), "m1", Side::Rover).unwrap();
+        assert!(why.contains("link version 9"), "{why}");
+        assert_eq!(hello_mismatch("dyfos/linked/v1/m1/viewer/x", "m1", Side::Rover), None);
+        assert_eq!(hello_mismatch(&format!("{HELLO}/{v}/m1"), "m1", Side::Rover), None);
     }
 
     #[test]

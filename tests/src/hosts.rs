@@ -116,3 +116,43 @@ impl Drop for Hosts {
         }
     }
 }
+
+/// A `stranger` process (`tests/src/bin/stranger.rs`) on host `host`, towards the
+/// rover's link at `port`: `silent N` connections held open, or `garbage SECONDS`
+/// of random frames. Killed when dropped.
+#[derive(Debug)]
+pub struct Stranger {
+    child: std::process::Child,
+    stdout: std::io::BufReader<std::process::ChildStdout>,
+}
+
+impl Stranger {
+    /// Starts `stranger MODE ADDR AMOUNT` on `host`.
+    pub fn start(hosts: &Hosts, host: usize, port: u16, mode: &str, amount: &str) -> Stranger {
+        let addr = format!("{}:{port}", if host == INTRUDER { ROVER_IP_2 } else { ROVER_IP });
+        let mut child = hosts
+            .command(host, &crate::bin("stranger"))
+            .args([mode, &addr, amount])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("start stranger");
+        let stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
+        Stranger { child, stdout }
+    }
+
+    /// The next line it prints (`holding N`, `sent …`); empty once it has exited.
+    pub fn line(&mut self) -> String {
+        let mut line = String::new();
+        let _ = std::io::BufRead::read_line(&mut self.stdout, &mut line);
+        line.trim().to_string()
+    }
+}
+
+impl Drop for Stranger {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

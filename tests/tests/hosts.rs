@@ -10,13 +10,19 @@
 //! - killed and restarted link and viewer-host processes: the mission resumes and
 //!   every process exits cleanly;
 //! - long legs at the fastest time scale (a burst of samples) lose no step;
-//! - a third host without the credentials cannot publish into the mission.
+//! - a third host without the credentials cannot publish into the mission;
+//! - a two-host mission ends as promptly as a one-host one, without a warning;
+//! - the finish reaches a viewer that was away when the rover got to its goal;
+//! - connections held open by a stranger do not keep a restarted link out, and are
+//!   counted in the log; a stranger's garbage costs a bounded log;
+//! - a link says when it cannot reach its peer, and when the peer serves another
+//!   mission; no link warns about Zenoh's gossip.
 
 use dyfos_client::eval::{MissionTrace, Recorder};
 use dyfos_client::mission::Mission;
 use dyfos_client::mission::topics::{Topics, TopicsConfig};
 use dyfos_shared::wire::mission::{MEASUREMENT_TOPIC, Measurement, MeasurementMsg, Observation};
-use dyfos_tests::hosts::{Hosts, INTRUDER, ROVER, VIEWER};
+use dyfos_tests::hosts::{Hosts, INTRUDER, ROVER, Stranger, VIEWER};
 use dyfos_tests::mission::{MissionFiles, Robot, small_mission, steps_of};
 use dyfos_tests::{PATIENCE, Sandbox};
 use std::process::ExitStatus;
@@ -89,8 +95,42 @@ fn two_hosts(hosts: &Hosts, files: &MissionFiles, name: &str, seed: u64) -> Outc
     assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
     for link in &mut links {
         assert!(link.terminate().success(), "the link did not stop cleanly:\n{}", link.log());
+        assert_quiet_start(&link.log());
     }
     outcome(&rover, &recorder.finish())
+}
+
+/// A link's log has no warning about Zenoh's own configuration at start.
+fn assert_quiet_start(log: &str) {
+    assert!(!log.contains("Gossip is disabled"), "{log}");
+    assert!(!log.contains("Scouting delay elapsed"), "{log}");
+}
+
+/// The lines of `log` with a warning or error.
+fn warnings(log: &str) -> Vec<&str> {
+    log.lines().filter(|l| l.contains(" WARN ") || l.contains(" ERROR ")).collect()
+}
+
+/// Seconds of the day of a log line's timestamp (`2026-11-22T00:45:41.898640Z  INFO …`).
+fn stamp(line: &str) -> Option<f64> {
+    let time = line.split_whitespace().next()?.split('T').nth(1)?.trim_end_matches('Z');
+    let mut parts = time.split(':');
+    let (h, m, s) = (parts.next()?.parse::<f64>().ok()?, parts.next()?.parse::<f64>().ok()?, parts.next()?);
+    Some(h * 3600.0 + m * 60.0 + s.parse::<f64>().ok()?)
+}
+
+/// The time of the first line of `log` containing `text`.
+fn stamp_of(log: &str, text: &str) -> Option<f64> {
+    log.lines().find(|l| l.contains(text)).and_then(stamp)
+}
+
+/// Waits (at most [`PATIENCE`]) until `robot`'s log contains `text`.
+fn wait_for_log(robot: &Robot, text: &str) {
+    let start = Instant::now();
+    while !robot.log().contains(text) {
+        assert!(start.elapsed() < PATIENCE, "waited in vain for `{text}` in:\n{}", robot.log());
+        std::thread::sleep(Duration::from_millis(50));
+    }
 }
 
 fn compare(one: &Outcome, two: &Outcome) {
@@ -360,4 +400,237 @@ fn demo_on_two_hosts_prints_the_one_host_table() {
     let (one, two) = (table("1"), table("2"));
     assert_eq!(one.len(), 6);
     assert_eq!(one, two, "the two-host demo's table differs from the one-host one");
+}
+
+/// The README's two-host setup, without an evaluation: at the goal the rover waits
+/// for every reader of its estimates, and on the rover's host that is the link.
+/// The viewer's link acknowledges for the (no) evaluations on its host, so the
+/// rover ends as soon as the viewer has the finish, with no warning.
+#[test]
+fn a_two_host_mission_ends_as_promptly_as_a_one_host_one() {
+    let Some(hosts) = Hosts::create("prompt-end", false) else { return };
+    let sandbox = Sandbox::new("hosts-prompt");
+    let _daemon = sandbox.start_daemon(&[]);
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let name = "m";
+    let mut links = [files.link_on(&hosts, ROVER, name, &[]), files.link_on(&hosts, VIEWER, name, &[])];
+    let mut viewer = files.viewer_on(&hosts, name, "dyfos", 6, &[]);
+    let started = Instant::now();
+    let mut rover = files.rover_on(&hosts, name, 6, "0", &[]);
+    // When each exits: the viewer once it has the finish, the rover once the
+    // finish and its last sample are acknowledged.
+    let (mut viewer_done, mut rover_done) = (None, None);
+    while viewer_done.is_none() || rover_done.is_none() {
+        if viewer_done.is_none()
+            && let Some(status) = viewer.try_exit()
+        {
+            assert!(status.success(), "viewer failed:\n{}", viewer.log());
+            viewer_done = Some(Instant::now());
+        }
+        if rover_done.is_none()
+            && let Some(status) = rover.try_exit()
+        {
+            assert!(status.success(), "rover failed:\n{}", rover.log());
+            rover_done = Some((Instant::now(), started.elapsed()));
+        }
+        assert!(started.elapsed() < PATIENCE * 2, "the mission did not end:\n{}\n{}", rover.log(), viewer.log());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let (Some(viewer_done), Some((rover_done, ran))) = (viewer_done, rover_done) else { unreachable!() };
+    let after_viewer = rover_done.saturating_duration_since(viewer_done);
+    eprintln!("two-host mission: the rover ran {ran:?} and ended {after_viewer:?} after the viewer");
+    assert!(
+        after_viewer < Duration::from_millis(1500),
+        "the rover lingered {after_viewer:?}:\n{}\nlinks:\n{}\n{}",
+        rover.log(),
+        links[0].log(),
+        links[1].log()
+    );
+    let rover_log = rover.log();
+    assert!(warnings(&rover_log).is_empty(), "the rover warned:\n{rover_log}");
+    for link in &mut links {
+        assert!(link.terminate().success(), "{}", link.log());
+    }
+}
+
+/// The viewer's host is cut off while the rover drives its last leg, so that the
+/// viewer counts as gone at the goal; it comes back a moment later and must still
+/// hear the finish (and both exit 0), because the rover keeps offering it.
+#[test]
+fn the_finish_reaches_a_viewer_that_was_away_at_the_goal() {
+    let Some(hosts) = Hosts::create("away-at-goal", false) else { return };
+    let sandbox = Sandbox::new("hosts-away");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mission = small_mission();
+    let n = mission.waypoints.len() as u64;
+    let files = MissionFiles::new(&sandbox, &mission);
+    let name = "m";
+    let mut links = [files.link_on(&hosts, ROVER, name, &[]), files.link_on(&hosts, VIEWER, name, &[])];
+    let mut viewer = files.viewer_on(&hosts, name, "dyfos", 8, &[]);
+    // Paced, so that the last leg lasts long enough to cut the link during it.
+    let mut rover = files.rover_on(&hosts, name, 8, "2", &["--measurement-timeout", "60"]);
+    let wait_event = |rover: &mut Robot, event: &str| {
+        let start = Instant::now();
+        while !steps_of(&rover.events(), event).iter().any(|(k, _)| *k == n) {
+            assert!(start.elapsed() < PATIENCE * 2, "no {event} for step {n}:\n{}", rover.log());
+            assert!(rover.try_exit().is_none(), "the rover ended early:\n{}", rover.log());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    wait_event(&mut rover, "rendezvous_sent");
+    hosts.set_link(false);
+    // The rover at the goal, without the viewer: it dead-reckons the last step
+    // once the viewer counts as gone, then offers the finish.
+    wait_event(&mut rover, "dead_reckoning");
+    std::thread::sleep(Duration::from_secs(1));
+    hosts.set_link(true);
+    let back = Instant::now();
+    let status = rover.wait_exit();
+    // The rover's last samples were lost on the link, so it waits out its linger
+    // for an acknowledgement of them (and says so).
+    eprintln!("the rover ended {:?} after the link came back: {:#?}", back.elapsed(), warnings(&rover.log()));
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    let viewer_status = viewer.wait_exit();
+    assert!(viewer_status.success(), "the viewer did not hear the finish:\n{}", viewer.log());
+    let events = rover.events();
+    assert!(
+        !events.iter().any(|e| e["event"] == "finish_unacknowledged"),
+        "the finish was not acknowledged: {events:#?}"
+    );
+    let viewer_events = viewer.events();
+    assert!(viewer_events.iter().any(|e| e["event"] == "finished"), "{viewer_events:#?}");
+    for link in &mut links {
+        assert!(link.terminate().success(), "{}", link.log());
+    }
+}
+
+/// 300 connections held open without a word by a host without the credentials:
+/// the viewer's link, restarted, reconnects within 2 s and the mission completes;
+/// the rover's link counts the handshakes it gave up on and reports them, at most
+/// once per 10 s.
+#[test]
+fn silent_connections_do_not_keep_a_restarted_link_out() {
+    let Some(hosts) = Hosts::create("silent-connections", true) else { return };
+    let sandbox = Sandbox::new("hosts-silent");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mission = there_and_back();
+    let files = MissionFiles::new(&sandbox, &mission);
+    let name = "m";
+    let mut rover_link = files.link_on(&hosts, ROVER, name, &[]);
+    let mut viewer_link = files.link_on(&hosts, VIEWER, name, &[]);
+    let mut viewer = files.viewer_on(&hosts, name, "dyfos", 9, &["--rover-timeout", "120"]);
+    let mut recorder = files.recorder(name);
+    let mut rover = files.rover_on(&hosts, name, 9, "2", &["--measurement-timeout", "120"]);
+    record_until(&mut recorder, &mut rover, "the first update", |t| t.updates() >= 1);
+
+    let mut stranger = Stranger::start(&hosts, INTRUDER, 7447, "silent", "300");
+    assert_eq!(stranger.line(), "holding 300");
+    // Long enough for the rover's link to give up on the first of them.
+    std::thread::sleep(Duration::from_secs(3));
+    viewer_link.kill9();
+    let restarted = time_of_day();
+    viewer_link = files.link_on(&hosts, VIEWER, name, &[]);
+    wait_for_log(&viewer_link, "the other host is connected");
+    let log = viewer_link.log();
+    let connected = stamp_of(&log, "the other host is connected").expect("a connected line") - restarted;
+    let opened = stamp_of(&log, "Using ZID").expect("zenoh's first line") - restarted;
+    eprintln!(
+        "with 300 silent connections the restarted link connected {connected:.3} s after it was started (its Zenoh session opened at {opened:.3} s)"
+    );
+    assert!(connected <= 2.0, "the restarted link took {connected:.3} s to connect:\n{log}");
+    let before = recorder.trace().updates();
+    record_until(&mut recorder, &mut rover, "an update after the restart", |t| t.updates() > before);
+    let status = record_until_exit(&mut recorder, &mut rover, PATIENCE * 4);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    wait_for_log(&rover_link, "given up (no handshake within 2s)");
+    drop(stranger);
+    for link in [&mut rover_link, &mut viewer_link] {
+        assert!(link.terminate().success(), "{}", link.log());
+        assert_quiet_start(&link.log());
+    }
+    let log = rover_link.log();
+    let reports: Vec<&str> = log.lines().filter(|l| l.contains("incoming connections")).collect();
+    eprintln!("{}", reports.join("\n"));
+    // At most one report per 10 s (the first at once).
+    let stamps: Vec<f64> = reports.iter().filter_map(|l| stamp(l)).collect();
+    assert!(stamps.windows(2).all(|w| w[1] - w[0] >= 9.9), "{reports:#?}");
+}
+
+/// Now, as seconds of the (UTC) day, like [`stamp`].
+fn time_of_day() -> f64 {
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).expect("after 1970");
+    (now.as_secs() % 86_400) as f64 + f64::from(now.subsec_nanos()) * 1e-9
+}
+
+/// Random frames from a host without the credentials for `SECONDS`: Zenoh quotes
+/// each in a line of its own (a new kind of line each time), yet the rover's link
+/// writes at most 200 KB per minute, and says how many lines it left out, also
+/// for the last window when it stops.
+#[test]
+fn a_strangers_garbage_costs_a_bounded_log() {
+    const SECONDS: u64 = 30;
+    let Some(hosts) = Hosts::create("garbage", true) else { return };
+    let sandbox = Sandbox::new("hosts-garbage");
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let mut rover_link = files.link_on(&hosts, ROVER, "m", &[]);
+    wait_for_log(&rover_link, "link started");
+    let mut stranger = Stranger::start(&hosts, INTRUDER, 7447, "garbage", &SECONDS.to_string());
+    let sent = stranger.line();
+    assert!(sent.starts_with("sent "), "{sent}");
+    assert!(rover_link.terminate().success(), "{}", rover_link.log());
+    let log = rover_link.log();
+    let bound = 200 * 1024 * SECONDS as usize / 60;
+    eprintln!("{sent}: {} bytes of log in {SECONDS} s (bound {bound})", log.len());
+    assert!(log.len() <= bound, "{} bytes of log:\n{}", log.len(), &log[..log.len().min(20_000)]);
+    assert!(log.contains(" more in the last 10 s"), "nothing says what was left out:\n{log}");
+    // The summary of the window open at the stop comes after the stop.
+    let stopped = log.find("link stopped").expect("a stop line");
+    assert!(log[stopped..].contains(" more in the last 10 s"), "no summary at exit:\n{}", &log[stopped..]);
+    assert_quiet_start(&log);
+}
+
+/// A viewer's link whose peer is not there says so, with Zenoh's reason, and keeps
+/// trying.
+#[test]
+fn a_link_that_cannot_reach_its_peer_says_so() {
+    let Some(hosts) = Hosts::create("unreachable", false) else { return };
+    let sandbox = Sandbox::new("hosts-unreachable");
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let mut viewer_link = files.link_on(&hosts, VIEWER, "m", &[]);
+    wait_for_log(&viewer_link, "cannot reach the other host");
+    let log = viewer_link.log();
+    let line = log.lines().find(|l| l.contains("cannot reach the other host")).unwrap_or_default();
+    eprintln!("{line}");
+    assert!(line.contains(&hosts.rover_endpoint(VIEWER, 7447)), "the endpoint is named:\n{log}");
+    // Then the peer comes, and the link connects.
+    let mut rover_link = files.link_on(&hosts, ROVER, "m", &[]);
+    wait_for_log(&viewer_link, "the other host is connected");
+    for link in [&mut viewer_link, &mut rover_link] {
+        assert!(link.terminate().success(), "{}", link.log());
+        assert_quiet_start(&link.log());
+    }
+}
+
+/// Two links with the right credentials but different mission names: nothing
+/// flows between them, and each says once which mission the other serves.
+#[test]
+fn a_peer_of_another_mission_is_named_once_on_both_sides() {
+    let Some(hosts) = Hosts::create("other-mission", false) else { return };
+    let sandbox = Sandbox::new("hosts-other-mission");
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let mut rover_link = files.link_on(&hosts, ROVER, "field-1", &[]);
+    let mut viewer_link = files.link_on(&hosts, VIEWER, "field-2", &[]);
+    wait_for_log(&rover_link, "serves mission `field-2`, this one `field-1`");
+    wait_for_log(&viewer_link, "serves mission `field-1`, this one `field-2`");
+    // A restart of the other side says nothing new.
+    viewer_link.kill9();
+    viewer_link = files.link_on(&hosts, VIEWER, "field-2", &[]);
+    wait_for_log(&viewer_link, "serves mission `field-1`");
+    std::thread::sleep(Duration::from_secs(2));
+    for link in [&mut rover_link, &mut viewer_link] {
+        assert!(link.terminate().success(), "{}", link.log());
+        let log = link.log();
+        assert_eq!(log.matches("serves mission").count(), 1, "said more than once:\n{log}");
+    }
 }

@@ -318,3 +318,96 @@ fn a_mission_with_the_learned_noise_model_runs_end_to_end() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--model FILE"), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// `dyfos ape` prints, from the rover's `--mcap` file, the demo's table of the
+/// error the evaluation measured; a file without `/dyfos/ape` is refused.
+#[test]
+fn dyfos_ape_prints_the_table_of_a_missions_mcap_file() {
+    let sandbox = Sandbox::new("mission-ape-cmd");
+    let _daemon = sandbox.start_daemon(&[]);
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let dir = sandbox.state_dir.with_extension("ape");
+    std::fs::create_dir_all(&dir).unwrap();
+    let (rover_mcap, viewer_mcap) = (dir.join("rover-run.mcap"), dir.join("viewer-run.mcap"));
+    let recorder = files.recorder("m");
+    let mut viewer = files.viewer("m", "dyfos", 2, &["--mcap", viewer_mcap.to_str().unwrap()]);
+    let mut rover = files.rover("m", 2, "0", &["--mcap", rover_mcap.to_str().unwrap()]);
+    let (status, trace) = record_until_exit(recorder, &mut rover);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    let ape = trace.ape().expect("samples");
+
+    let out = Command::new(bin("dyfos")).arg("ape").arg(&rover_mcap).arg(&rover_mcap).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let header = stdout.lines().find(|l| l.starts_with("APE (cm)")).expect("a table header");
+    assert_eq!(header.split_whitespace().skip(2).collect::<Vec<_>>(), ["rover-run", "rover-run"]);
+    for (row, value) in ["RMSE", "Median", "Mean", "Std", "Max"].iter().zip(ape.centimetres()) {
+        let line = stdout.lines().find(|l| l.starts_with(row)).unwrap_or_else(|| panic!("no {row} row:\n{stdout}"));
+        let expected = format!("{value:.1}");
+        assert_eq!(line.split_whitespace().skip(1).collect::<Vec<_>>(), [&expected, &expected], "{stdout}");
+    }
+    assert!(stdout.contains(&format!("rover-run: {}", ape.count)), "{stdout}");
+
+    let out = Command::new(bin("dyfos")).arg("ape").arg(&viewer_mcap).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("has no /dyfos/ape messages"), "{err}");
+    let out = Command::new(bin("dyfos")).arg("ape").arg(&files.mission).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("is not an MCAP file"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Lines left out by the log's rate limit in the window still open at the exit are
+/// summarised before the rover and the viewer exit.
+#[test]
+fn the_rover_and_viewer_say_at_exit_what_their_log_left_out() {
+    use dyfos_client::mission::topics::{Topics, TopicsConfig};
+    use dyfos_shared::wire::mission::{AckMsg, ROVER_ACK_TOPIC, VIEWER_ACK_TOPIC};
+    let sandbox = Sandbox::new("mission-log-exit");
+    let _daemon = sandbox.start_daemon(&[]);
+    let files = MissionFiles::new(&sandbox, &small_mission());
+    let mut recorder = files.recorder("m");
+    let mut viewer = files.viewer("m", "dyfos", 3, &[]);
+    // At 2× the last leg lasts a few seconds: the flood comes during it, most
+    // likely in the log's last window (if a window ends meanwhile, its summary is
+    // written anyway, and the counts must still add up).
+    let mut rover = files.rover("m", 3, "2", &[]);
+    let n = small_mission().waypoints.len() as u32;
+    let start = Instant::now();
+    while recorder.trace().step() < n {
+        assert!(start.elapsed() < PATIENCE, "no last leg:\n{}", rover.log());
+        recorder.wait(Duration::from_millis(20));
+        recorder.poll();
+    }
+    // Malformed acknowledgements to both: each logs a few and counts the rest.
+    let topics = Topics::open(&TopicsConfig {
+        prefix: sandbox.prefix.clone(),
+        domain: Some(sandbox.domain.clone()),
+        mission: "m".into(),
+    })
+    .unwrap();
+    // Kept until the end: a publisher that goes takes its unread samples along.
+    let mut outboxes = Vec::new();
+    for topic in [VIEWER_ACK_TOPIC, ROVER_ACK_TOPIC] {
+        let outbox = topics.outbox::<AckMsg>("mission", topic).unwrap();
+        for step in 0..40 {
+            outbox.send(AckMsg { instance: 1, step, kind: 99 }).unwrap();
+        }
+        outboxes.push(outbox);
+    }
+    let (status, _) = record_until_exit(recorder, &mut rover);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    for (who, log) in [("rover", rover.log()), ("viewer", viewer.log())] {
+        let (summaries, written): (Vec<&str>, Vec<&str>) = log
+            .lines()
+            .filter(|l| l.contains("ignoring a malformed acknowledgement"))
+            .partition(|l| l.contains(" more in the last 10 s like: "));
+        assert!(!summaries.is_empty(), "{who} did not say what it left out:\n{log}");
+        let left_out: usize =
+            summaries.iter().filter_map(|l| l.split("… ").nth(1)?.split(' ').next()?.parse::<usize>().ok()).sum();
+        assert!(left_out >= 1 && written.len() + left_out <= 40, "{who}: {written:#?} {summaries:#?}");
+    }
+}

@@ -40,6 +40,11 @@ struct Cli {
     /// dead-reckons until it is back).
     #[arg(allow_hyphen_values = true, long, default_value_t = 2.0)]
     presence_timeout: f64,
+    /// At the goal, how long at most to keep offering the finish to a viewer that
+    /// has not acknowledged it (and to wait for the estimates' readers), wall
+    /// seconds; by default as long as a viewer waits for a silent rover.
+    #[arg(allow_hyphen_values = true, long, default_value_t = dyfos_client::rover::LINGER.as_secs_f64())]
+    linger: f64,
     /// Drive without a viewer (no rendezvous, no measurements): the baseline.
     #[arg(long)]
     dead_reckoning: bool,
@@ -70,6 +75,7 @@ fn config(cli: &Cli) -> anyhow::Result<RoverConfig> {
         measurement_timeout: seconds("measurement-timeout", cli.measurement_timeout)?,
         viewer_timeout: seconds("viewer-timeout", cli.viewer_timeout)?,
         presence_timeout: seconds("presence-timeout", cli.presence_timeout)?,
+        linger: seconds("linger", cli.linger)?,
         dead_reckoning: cli.dead_reckoning,
         events: cli.events.clone(),
         mcap: cli.mcap.clone(),
@@ -89,13 +95,16 @@ fn main() -> ExitCode {
         }
     };
     shutdown::install();
-    match run_rover(&config, &shutdown::requested).context("mission failed") {
+    let code = match run_rover(&config, &shutdown::requested).context("mission failed") {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("dyfos-rover: {e:#}");
             ExitCode::from(1)
         }
-    }
+    };
+    // Say how many lines the rate limit left out in the last window.
+    dyfos_client::logging::flush();
+    code
 }
 
 #[cfg(test)]

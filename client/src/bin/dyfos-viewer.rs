@@ -141,13 +141,16 @@ fn main() -> ExitCode {
         }
     };
     shutdown::install();
-    match run_viewer(&config, &shutdown::requested).context("viewer failed") {
+    let code = match run_viewer(&config, &shutdown::requested).context("viewer failed") {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("dyfos-viewer: {e:#}");
             ExitCode::from(1)
         }
-    }
+    };
+    // Say how many lines the rate limit left out in the last window.
+    dyfos_client::logging::flush();
+    code
 }
 
 #[cfg(test)]

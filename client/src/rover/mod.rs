@@ -13,9 +13,12 @@
 //!    measurement of step i+1 (and acknowledges it); a measurement updates the
 //!    EKF, anything else — not observed, late, or a viewer that is gone — leaves
 //!    it dead-reckoning, and the log says which;
-//! 5. repeats until the goal, then tells the viewer it has finished (again until
-//!    acknowledged, or the viewer is gone) and waits, at most `linger`, for any
-//!    evaluation to acknowledge its last sample.
+//! 5. repeats until the goal, then tells the viewer it has finished, again every
+//!    [`RESEND_INTERVAL`] until the viewer acknowledges it — also while the viewer
+//!    counts as gone, since it may come back — and waits for every reader of its
+//!    estimates (an evaluation, or the link that carries them to another host) to
+//!    acknowledge its last sample; both within [`RoverConfig::linger`] of reaching
+//!    the goal.
 //!
 //! The viewer is present while its heartbeats arrive ([`crate::mission::presence`]);
 //! one silent for `presence_timeout` is gone: the rover dead-reckons the steps it
@@ -97,14 +100,18 @@ pub struct RoverConfig {
     pub mcap: Option<PathBuf>,
     /// Encoding of [`RoverConfig::mcap`]: Foxglove's JSON (default) or ROS 2's CDR.
     pub mcap_profile: McapProfile,
-    /// At the goal, how long to wait for the evaluation (estimate readers, if any)
-    /// to acknowledge the last sample before exiting, wall time.
+    /// At the goal, how long at most to keep offering the finish to a viewer that
+    /// has not acknowledged it, and to wait for the readers of the estimates (if
+    /// any) to acknowledge the last sample, wall time. As long as a viewer waits
+    /// for a silent rover by default (its `rover_timeout`), so that a viewer still
+    /// waiting when the link comes back hears the finish.
     pub linger: Duration,
 }
 
 impl RoverConfig {
     /// Defaults: paced 20× real time, 10 s measurement and viewer timeouts, a
-    /// viewer silent for 2 s is gone, a sample every 5 ticks (4 Hz of simulated time).
+    /// viewer silent for 2 s is gone, a sample every 5 ticks (4 Hz of simulated
+    /// time), a linger of [`LINGER`].
     pub fn new(topics: TopicsConfig, mission: Mission, seed: u64) -> Self {
         RoverConfig {
             topics,
@@ -120,10 +127,13 @@ impl RoverConfig {
             events: None,
             mcap: None,
             mcap_profile: McapProfile::Foxglove,
-            linger: Duration::from_secs(5),
+            linger: LINGER,
         }
     }
 }
+
+/// The default [`RoverConfig::linger`]: the viewer's default `rover_timeout`.
+pub const LINGER: Duration = Duration::from_secs(20);
 
 /// Why the rover could not run its mission.
 #[derive(Debug, thiserror::Error)]
@@ -520,21 +530,23 @@ fn drive(
         run.publish(step, if last { Phase::Finished } else { Phase::AtWaypoint }, updated)?;
     }
     let steps = mission.waypoints.len() as u32;
+    let deadline = Instant::now() + config.linger;
     if !config.dead_reckoning {
         run.send_reliably(&RendezvousState::Finished { step: steps, sim_time: run.sim_time })?;
-        // Until the viewer acknowledges, is gone, or the linger time is up.
-        let start = Instant::now();
+        // Until the viewer acknowledges or the linger time is up: a viewer that
+        // counts as gone may be back (a link that faded at the goal).
         run.log_presence = false;
-        while !run.pending.as_ref().is_some_and(|p| p.acked(run.ports.viewer.instance()))
-            && run.ports.viewer.present()
-            && start.elapsed() < config.linger
-            && !stop()
-        {
+        let acked = |run: &Run| run.pending.as_ref().is_some_and(|p| p.acked(run.ports.viewer.instance()));
+        while !acked(&run) && Instant::now() < deadline && !stop() {
             run.service()?;
             run.ports.viewer_acks.wait(Duration::from_millis(20));
         }
+        if !acked(&run) && !stop() {
+            tracing::warn!("the viewer did not acknowledge the finish within {:?}", config.linger);
+            run.log.record("finish_unacknowledged", run.sim_time, json!({"step": steps}));
+        }
     }
-    linger(&run, config.linger, stop);
+    linger(&run, deadline, stop);
     run.log.record(
         "finished",
         run.sim_time,
@@ -544,22 +556,31 @@ fn drive(
     Ok(RoverReport { steps, measured, missed, final_belief: run.ekf.belief(), messages_sent: run.messages_sent })
 }
 
-/// Waits up to `limit` for every evaluation listening to the estimates (each one
+/// Waits until `deadline` for every reader of the estimates (each one
 /// acknowledges once) to confirm it holds the last sample: a reader that had not
-/// yet connected when the rover's ports closed would lose the samples.
-fn linger(run: &Run, limit: Duration, stop: &impl Fn() -> bool) {
+/// yet taken the samples when the rover's ports closed would lose them. Across
+/// hosts the reader is the link, whose other end acknowledges for the evaluations
+/// on its host.
+fn linger(run: &Run, deadline: Instant, stop: &impl Fn() -> bool) {
     let last = run.sample.saturating_sub(1);
-    let start = Instant::now();
     let mut acks = 0;
-    while run.ports.estimate.readers() > acks {
-        let left = limit.saturating_sub(start.elapsed());
-        if left.is_zero() || stop() {
-            tracing::warn!("an evaluation did not acknowledge the last sample within {limit:?}");
+    loop {
+        // What arrived already counts, however late it is.
+        acks += run.ports.ack.drain().iter().filter(|a| a.sample >= last).count();
+        if run.ports.estimate.readers() <= acks {
             return;
         }
-        if run.ports.ack.recv_timeout(left, stop).is_some_and(|a| a.sample >= last) {
-            acks += 1;
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() || stop() {
+            tracing::warn!(
+                "{} of {} readers of the estimates did not acknowledge the last sample within {:?}",
+                run.ports.estimate.readers().saturating_sub(acks),
+                run.ports.estimate.readers(),
+                run.config.linger
+            );
+            return;
         }
+        run.ports.ack.wait(left);
     }
 }
 

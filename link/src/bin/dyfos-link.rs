@@ -6,6 +6,7 @@
 
 use clap::Parser;
 use dyfos_client::shutdown;
+use dyfos_link::health::{Counts, Health, TALLIES};
 use dyfos_link::{Link, LinkConfig, LinkStartError, Side};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -77,8 +78,9 @@ fn config(cli: &Cli) -> anyhow::Result<(LinkConfig, Option<Duration>)> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // Zenoh says why it refused a peer (no or wrong credentials) only at debug
-    // level: those lines are shown, rate-limited like warnings.
-    dyfos_client::logging::init_with("info", &[REFUSALS]);
+    // level: those lines are shown, rate-limited like warnings. Handshakes it gave
+    // up on and failed attempts to reach the other host are counted and reported.
+    dyfos_client::logging::init_with("info", &[REFUSALS], &TALLIES);
     let (config, exit_after) = match config(&cli) {
         Ok(c) => c,
         Err(e) => {
@@ -100,7 +102,11 @@ fn main() -> ExitCode {
     };
     let start = std::time::Instant::now();
     let mut connected = false;
+    let mut health = Health::new(dyfos_client::logging::WINDOW);
     while !shutdown::requested() && exit_after.is_none_or(|d| start.elapsed() < d) {
+        for line in health.report(std::time::Instant::now(), &Counts::now()) {
+            tracing::warn!("{line}");
+        }
         let now = link.connected();
         if now != connected {
             connected = now;
@@ -114,6 +120,7 @@ fn main() -> ExitCode {
     }
     let stats = link.stop();
     tracing::info!(sent = stats.sent, received = stats.received, dropped = stats.dropped, "link stopped");
+    dyfos_client::logging::flush();
     ExitCode::SUCCESS
 }
 

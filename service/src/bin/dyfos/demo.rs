@@ -385,10 +385,19 @@ fn start_daemon(bins: &Binaries, prefix: &str, state: &Path, model: Option<&Path
 /// The table of paper Table I: one column per arm, rows RMSE, median, mean, std,
 /// max in cm; with several seeds, mean ± std over seeds.
 fn table(results: &[RunResult], arms: &[Arm]) -> String {
+    let columns: Vec<(&str, Vec<[f64; 5]>)> = arms
+        .iter()
+        .map(|arm| (arm.name(), results.iter().filter(|r| r.arm == *arm).map(|r| r.ape.centimetres()).collect()))
+        .collect();
+    ape_table(&columns)
+}
+
+/// The APE table: one column per (name, runs' `ApeStats::centimetres`), rows RMSE,
+/// median, mean, std, max in cm; a column of several runs shows mean ± std over them.
+pub fn ape_table(columns: &[(&str, Vec<[f64; 5]>)]) -> String {
     let rows = ["RMSE", "Median", "Mean", "Std", "Max"];
     let mut cells: Vec<Vec<String>> = Vec::new();
-    for arm in arms {
-        let per_seed: Vec<[f64; 5]> = results.iter().filter(|r| r.arm == *arm).map(|r| r.ape.centimetres()).collect();
+    for (_, per_seed) in columns {
         let col = (0..5)
             .map(|k| {
                 let v: Vec<f64> = per_seed.iter().map(|s| s[k]).collect();
@@ -398,12 +407,17 @@ fn table(results: &[RunResult], arms: &[Arm]) -> String {
             .collect();
         cells.push(col);
     }
-    let width =
-        cells.iter().flatten().map(|c| c.chars().count()).chain(arms.iter().map(|a| a.name().len())).max().unwrap_or(8)
-            + 2;
+    let width = cells
+        .iter()
+        .flatten()
+        .map(|c| c.chars().count())
+        .chain(columns.iter().map(|(name, _)| name.chars().count()))
+        .max()
+        .unwrap_or(8)
+        + 2;
     let mut out = format!("{:<8}", "APE (cm)");
-    for a in arms {
-        out += &format!("{:>width$}", a.name());
+    for (name, _) in columns {
+        out += &format!("{name:>width$}");
     }
     out.push('\n');
     for (k, row) in rows.iter().enumerate() {

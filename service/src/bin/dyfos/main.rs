@@ -4,6 +4,7 @@
 //! Exit codes: 0 success, 2 invalid input (the message names the field), 3 no
 //! feasible pose, 1 anything else; `dyfos replay` has its own (see its `--help`).
 
+mod ape;
 mod demo;
 mod hosts;
 mod offline;
@@ -27,6 +28,8 @@ enum Command {
     /// Run the paper's simulated evaluation end to end: dyfosd, a rover and a viewer
     /// per algorithm; print the APE table and write an SVG per algorithm.
     Demo(demo::DemoArgs),
+    /// Print the APE table of missions from their MCAP files (`dyfos-rover --mcap`, the demo's `mission-*.mcap`).
+    Ape(ape::ApeArgs),
     /// Search a scenario file offline and print the answer as JSON.
     Solve(offline::SolveArgs),
     /// Evaluate one candidate x = (ρ, ψ, φ, ψ_v) of a scenario and print the verdict as JSON.
@@ -87,6 +90,7 @@ pub fn print_json(value: &serde_json::Value) {
 fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Demo(args) => demo::demo(&args),
+        Command::Ape(args) => ape::ape(&args),
         Command::Solve(args) => offline::solve(&args),
         Command::Eval(args) => offline::eval(&args),
         Command::Query(args) => online::query(&args),
