@@ -341,6 +341,13 @@ fn rover_and_viewer_write_ros2_bags_on_request() {
     assert_eq!(topics["/dyfos/rendezvous/request"], times);
     assert_eq!(topics["/dyfos/rendezvous/measurement"].len(), n);
     assert!(topics["/dyfos/rendezvous/answer"].is_empty());
+    // `dyfos ape` reads the error from the ROS 2 profile's CDR as from the trace.
+    let out = std::process::Command::new(dyfos_tests::bin("dyfos")).arg("ape").arg(&rover_file).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let rmse = stdout.lines().find(|l| l.starts_with("RMSE")).unwrap_or_else(|| panic!("no RMSE row:\n{stdout}"));
+    let expected = format!("{:.1}", trace.ape().expect("samples").centimetres()[0]);
+    assert_eq!(rmse.split_whitespace().nth(1), Some(expected.as_str()), "{stdout}");
 
     let topics = read_ros2(&viewer_file);
     let events = viewer.events();

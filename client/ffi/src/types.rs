@@ -646,8 +646,10 @@ mod tests {
             let failure = decoded(r).unwrap_err();
             assert_eq!(failure.code, DYFOS_STATUS_MALFORMED_DELTA, "{text:?}: {}", failure.message);
         }
-        let good =
-            dyfos_rendezvous_request { deltas_json: c"[{\"clear\": {}}]".as_ptr(), ..dyfos_rendezvous_request::defaults() };
+        let good = dyfos_rendezvous_request {
+            deltas_json: c"[{\"clear\": {}}]".as_ptr(),
+            ..dyfos_rendezvous_request::defaults()
+        };
         assert_eq!(decoded(good).unwrap().deltas, vec![MapDelta::Clear]);
     }
 

@@ -20,6 +20,7 @@
 //! daemon, one of the names listed in [`ErrorInfo`].
 
 use dyfos_client::prelude::*;
+use dyfos_shared::wire::map::{decode_bounds, decode_sun};
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
@@ -222,6 +223,14 @@ impl RequestArgs<'_> {
             params,
         })
     }
+}
+
+/// Bounds and sun given as arguments, checked as the daemon checks them (the same
+/// code, `invalid_delta`, as a bad `set_bounds` or `set_sun` delta).
+pub(crate) fn bounds_and_sun(bounds: [f64; 4], sun: (f64, f64)) -> Result<(Bounds, Sun), ErrorInfo> {
+    let bounds = decode_bounds(bounds).map_err(|r| ErrorInfo::rejection(&r))?;
+    let sun = decode_sun([sun.0, sun.1]).map_err(|r| ErrorInfo::rejection(&r))?;
+    Ok((bounds, sun))
 }
 
 /// A JSON array of map deltas, as in `dyfos map apply` files (`docs/deltas.md`);
@@ -469,8 +478,7 @@ impl PyClient {
         replace: bool,
         timeout: Option<f64>,
     ) -> PyResult<u64> {
-        let bounds = Bounds::new(bounds).map_err(|e| to_pyerr(py, ErrorInfo::new("malformed_request", e)))?;
-        let sun = Sun::new(sun.0, sun.1).map_err(|e| to_pyerr(py, ErrorInfo::new("malformed_request", e)))?;
+        let (bounds, sun) = bounds_and_sun(bounds, sun).map_err(|e| to_pyerr(py, e))?;
         let origin = dyfos_shared::math::Point3::from(origin);
         self.call(py, timeout, |c, t| c.upload_octomap(map_id, &bt, origin, bounds, sun, replace, t))
     }
@@ -485,8 +493,7 @@ impl PyClient {
         sun: (f64, f64),
         timeout: Option<f64>,
     ) -> PyResult<u64> {
-        let bounds = Bounds::new(bounds).map_err(|e| to_pyerr(py, ErrorInfo::new("malformed_request", e)))?;
-        let sun = Sun::new(sun.0, sun.1).map_err(|e| to_pyerr(py, ErrorInfo::new("malformed_request", e)))?;
+        let (bounds, sun) = bounds_and_sun(bounds, sun).map_err(|e| to_pyerr(py, e))?;
         self.call(py, timeout, |c, t| c.create_map(map_id, bounds, sun, t))
     }
 

@@ -12,7 +12,7 @@ use super::{ErrorInfo, PyClient, to_pyerr};
 use dyfos_shared::limits::MAX_DELTAS_PER_MESSAGE;
 use dyfos_shared::math::Point3;
 use dyfos_shared::world::octomap::{Octomap, OctomapError};
-use dyfos_shared::world::{Bounds, CellIndex, MapDelta, Sun, VoxelBlock, VoxelError, VoxelGrid, World};
+use dyfos_shared::world::{CellIndex, MapDelta, VoxelBlock, VoxelError, VoxelGrid, World};
 use pyo3::prelude::*;
 use std::collections::HashMap;
 
@@ -211,8 +211,7 @@ pub(crate) fn upload_voxels(
     replace: bool,
     timeout: Option<f64>,
 ) -> PyResult<u64> {
-    let bounds = Bounds::new(bounds).map_err(|e| to_pyerr(py, ErrorInfo::new("malformed_request", e)))?;
-    let sun = Sun::new(sun.0, sun.1).map_err(|e| to_pyerr(py, ErrorInfo::new("malformed_request", e)))?;
+    let (bounds, sun) = crate::bounds_and_sun(bounds, sun).map_err(|e| to_pyerr(py, e))?;
     let world = World::new(0, bounds, sun, [], Some(voxels.0.clone()))
         .map_err(|e| to_pyerr(py, ErrorInfo::new("invalid_delta", e)))?;
     client.call(py, timeout, |c, t| c.upload_map(map_id, &world, replace, t))

@@ -106,7 +106,10 @@ def test_invalid_map_requests(client: dyfos.Client, tmp_path: Path) -> None:
     e = raises(dyfos.InvalidRequestError, "malformed_delta", client.apply, map_id, [{"set_sun": {"elevation": 0.5}}])
     assert e.detail.startswith("deltas[0].set_sun: missing field `azimuth`"), e.detail
     assert client.snapshot(map_id)["version"] == 0, "a malformed batch changes nothing"
-    raises(dyfos.InvalidRequestError, "malformed_request", client.create_map, 0x2BAD, [10, 10, -10, -10], (0.7, 2.1))
+    # Bounds and sun given as arguments get the daemon's code for them, as in C.
+    raises(dyfos.InvalidRequestError, "invalid_delta", client.create_map, 0x2BAD, [10, 10, -10, -10], (0.7, 2.1))
+    raises(dyfos.InvalidRequestError, "invalid_delta", client.create_map, 0x2BAD, [-10, -10, 10, 10], (5.0, 2.1))
+    raises(dyfos.InvalidRequestError, "invalid_delta", client.apply, map_id, [{"set_sun": {"elevation": 5.0, "azimuth": 2.1}}])
     raises(dyfos.InvalidRequestError, "invalid_scenario", client.upload_scenario, {"bounds": [0, 0, 1, 1]})
     bad = dyfos.read_scenario(EXAMPLE)
     bad["params"] = {"rho_min": 9.0, "rho_max": 6.0}

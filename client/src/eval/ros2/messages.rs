@@ -3,18 +3,18 @@
 //! gives ROS 2's bytes (fixed-size arrays as tuples, sequences and strings with
 //! their length).
 
-use serde::Serialize;
 use serde::ser::{SerializeTuple, Serializer};
+use serde::{Deserialize, Serialize};
 
 /// `builtin_interfaces/Time` (also `Duration`, same fields).
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct Time {
     pub sec: i32,
     pub nanosec: u32,
 }
 
 /// `std_msgs/Header`.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 pub struct Header {
     pub stamp: Time,
     pub frame_id: String,
@@ -236,7 +236,7 @@ pub struct Measurement {
 }
 
 /// `dyfos_msgs/Ape`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Ape {
     pub header: Header,
     pub sample: u64,

@@ -80,6 +80,17 @@ fn cdr(value: &impl Serialize) -> Result<Vec<u8>, String> {
     Ok(bytes)
 }
 
+/// One `/dyfos/ape` message of a ROS 2 profile file (`dyfos_msgs/Ape` in CDR):
+/// the sample number and its error, m.
+pub fn decode_ape(data: &[u8]) -> Result<(u64, f64), String> {
+    let body = data
+        .strip_prefix(&ENCAPSULATION)
+        .ok_or("not little-endian CDR (its encapsulation header is not 00 01 00 00)")?;
+    let (ape, _) = cdr_encoding::from_bytes::<messages::Ape, byteorder::LittleEndian>(body)
+        .map_err(|e| format!("not a dyfos_msgs/Ape: {e}"))?;
+    Ok((ape.sample, ape.ape_m))
+}
+
 /// The ROS 2 profile's encoding: CDR. It remembers how many markers each entity
 /// drew, to delete those a later version of the entity no longer has.
 #[derive(Debug, Default)]

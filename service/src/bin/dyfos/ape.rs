@@ -1,11 +1,12 @@
 //! `dyfos ape FILE.mcap…`: the absolute position error of missions run by hand,
 //! from the `/dyfos/ape` channel of their MCAP files (`dyfos-rover --mcap`, or the
-//! demo's `mission-*.mcap`), as the demo's table: one column per file.
+//! demo's `mission-*.mcap`, in either profile), as the demo's table: one column per
+//! file.
 
 use crate::Failure;
 use crate::demo::ape_table;
 use anyhow::anyhow;
-use dyfos_client::eval::ApeStats;
+use dyfos_client::eval::{ApeStats, ros2};
 use std::path::{Path, PathBuf};
 
 /// The channel holding the error of each sample (`dyfos.Ape`, field `ape_m`).
@@ -52,13 +53,19 @@ fn file_ape(path: &Path) -> anyhow::Result<ApeStats> {
         if message.channel.topic != APE_TOPIC {
             continue;
         }
-        let value: serde_json::Value = serde_json::from_slice(&message.data)
-            .map_err(|e| anyhow!("{name}: message {index} on {APE_TOPIC} is not JSON: {e}"))?;
-        let sample = value["sample"].as_u64();
-        let ape = value["ape_m"].as_f64().filter(|v| v.is_finite() && *v >= 0.0);
-        let (Some(sample), Some(ape)) = (sample, ape) else {
+        let (sample, ape) = if message.channel.message_encoding == "cdr" {
+            // The ROS 2 profile (`--mcap-profile ros2`).
+            let (sample, ape) =
+                ros2::decode_ape(&message.data).map_err(|e| anyhow!("{name}: message {index} on {APE_TOPIC}: {e}"))?;
+            (Some(sample), Some(ape))
+        } else {
+            let value: serde_json::Value = serde_json::from_slice(&message.data)
+                .map_err(|e| anyhow!("{name}: message {index} on {APE_TOPIC} is not JSON: {e}"))?;
+            (value["sample"].as_u64(), value["ape_m"].as_f64())
+        };
+        let (Some(sample), Some(ape)) = (sample, ape.filter(|v| v.is_finite() && *v >= 0.0)) else {
             return Err(anyhow!(
-                "{name}: message {index} on {APE_TOPIC} needs `sample` (an integer) and `ape_m` (metres, ≥ 0): {value}"
+                "{name}: message {index} on {APE_TOPIC} needs `sample` (an integer) and `ape_m` (metres, ≥ 0)"
             ));
         };
         errors.push((sample, ape));
