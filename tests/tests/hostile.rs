@@ -560,7 +560,7 @@ fn an_upload_past_a_maps_limits_is_refused_before_it_completes() {
 #[test]
 fn a_brute_flood_never_makes_a_cheap_query_busy() {
     let sandbox = Sandbox::new("flood");
-    let _daemon = sandbox.start_daemon(&["--max-queued", "3", "--workers", "2"]);
+    let _daemon = sandbox.start_daemon(&["--set", "limits.max_queued=3", "--workers", "2"]);
     let mut client = sandbox.client();
     let s = scenario("golden/scenarios/numerical/map_00.json");
     client.upload_map(1, &s.world, false, PATIENCE).unwrap();

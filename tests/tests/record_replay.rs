@@ -212,6 +212,12 @@ fn a_recorded_run_replays_identically_and_a_changed_parameter_shows() {
     assert_eq!(count(topics::RECORDER), 0, "nothing was dropped");
     let config = &messages[topics::CONFIG][0];
     assert_eq!(config["config"]["prefix"], sandbox.prefix.as_str());
+    // Every key of the daemon's configuration, and no other: it reads back as one and
+    // writes out the same; `workers` as started.
+    let head: dyfos_service::daemon::DaemonConfig =
+        serde_json::from_value(config["config"].clone()).expect("the head is a configuration");
+    assert_eq!(head.to_json(head.workers), config["config"]);
+    assert_eq!((head.workers, head.recording.path.as_deref()), (2, Some(file.as_path())));
     assert_eq!(config["build"]["version"], env!("CARGO_PKG_VERSION"));
     let causes: Vec<&str> = messages[topics::MAP_CHANGE].iter().map(|m| m["cause"].as_str().unwrap_or("?")).collect();
     for cause in ["create", "upload", "apply", "inline", "delete"] {
@@ -258,8 +264,16 @@ fn a_killed_recording_daemon_leaves_readable_rotated_files() {
     let sandbox = Sandbox::new("record-kill");
     let dir = Dir::new("kill");
     let file = dir.0.join("field.mcap");
-    let args =
-        ["--workers", "2", "--record", file.to_str().unwrap(), "--record-max-bytes", "6000", "--record-keep", "2"];
+    let args = [
+        "--workers",
+        "2",
+        "--record",
+        file.to_str().unwrap(),
+        "--set",
+        "recording.max_bytes=6000",
+        "--set",
+        "recording.keep=2",
+    ];
     let mut daemon = sandbox.start_daemon_logging("info", &args);
     let maps = maps();
     let mut c = sandbox.client();
@@ -282,7 +296,7 @@ fn a_killed_recording_daemon_leaves_readable_rotated_files() {
         (last_written && rotated(2).exists()).then_some(())
     });
     daemon.kill9();
-    assert!(!rotated(3).exists(), "--record-keep 2 keeps two rotated files");
+    assert!(!rotated(3).exists(), "recording.keep = 2 keeps two rotated files");
     let current = file_index(&std::fs::read(&file).unwrap());
     for i in [1, 2] {
         let path = rotated(i);
