@@ -16,7 +16,10 @@
 //!
 //! Every message is JSON (`message_encoding` `json`) with a JSON Schema
 //! (`jsonschema`), so Foxglove shows it as it is. Floating-point numbers are
-//! written in the shortest form that parses back to the same bits.
+//! written in the shortest form that parses back to the same bits. [`replay`]
+//! re-runs a recording's queries against this build.
+
+pub mod replay;
 
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::params::{ModelKind, Params};

@@ -405,7 +405,7 @@ impl WorkerCheckpoint<'_> {
         }
         share.update(now, super::sched::thread_cpu_time());
         SHARE.set(Some(share));
-        if share.recent >= MAKE_WAY_ABOVE && CORES.with(dyfos_client::idle::IdleCores::busy) {
+        if share.recent >= MAKE_WAY_ABOVE && CORES.with(dyfos_process::idle::IdleCores::busy) {
             std::thread::yield_now();
         }
     }
@@ -413,7 +413,7 @@ impl WorkerCheckpoint<'_> {
 
 thread_local! {
     /// Whether the machine's cores are all taken, for [`WorkerCheckpoint::make_way`].
-    static CORES: dyfos_client::idle::IdleCores = dyfos_client::idle::IdleCores::of_this_machine();
+    static CORES: dyfos_process::idle::IdleCores = dyfos_process::idle::IdleCores::of_this_machine();
     /// How much of its core this thread had in its searches lately.
     static SHARE: Cell<Option<CoreShare>> = const { Cell::new(None) };
 }
