@@ -1,4 +1,4 @@
-//! Query latency and throughput of `dyfosd` (issue 5): the request mix, the
+//! Query latency and throughput of `dyfosd`: the request mix, the
 //! closed- and open-loop drivers the client processes of `dyfos-bench latency`
 //! run, the in-process baseline, and iceoryx2's raw request-response floor.
 //!
@@ -224,8 +224,9 @@ pub struct RunSamples {
 /// that has just spun is the one the scheduler lets wait longest; it then sleeps to
 /// the target (with a 1 ns timer slack, see [`precise_timers`]), as a robot's
 /// timed loop would. Another sender spinning for a moment, or the daemon polling,
-/// is not such a load: sleeping for them made 27–32 % of the sparse run's sends
-/// 15–150 µs late (`bench/RESULTS.md`, "Polling stops for a load that lasts").
+/// is not such a load: sleeping for them made many of the sparse run's sends late
+/// by a timer wake-up, which the open loop charges as latency (`bench/RESULTS.md`,
+/// "Why the scheduling defaults").
 fn wait_until(target: Instant, cores: &IdleCores) {
     const SPIN: Duration = Duration::from_micros(150);
     loop {

@@ -1,4 +1,4 @@
-//! The evidence for the learned SDSMM (issue 7): how well a trained model fits the
+//! The evidence for the learned SDSMM: how well a trained model fits the
 //! synthetic reference camera it was trained against, and what planning with it is
 //! worth when the poses are judged by that reference ("true") camera.
 //!

@@ -1,4 +1,4 @@
-//! OctoMap maps at scale (issue 13): a synthetic building of any size, written as
+//! OctoMap maps at scale: a synthetic building of any size, written as
 //! OctoMap's `.bt`, for load, update, restart and query figures beside the real
 //! Freiburg map.
 //!

@@ -24,7 +24,7 @@ fn latency_command_smoke_run() {
         .arg("--compare-daemon-arg=--spin-us=50")
         // Clients with a shorter poll window than the library default.
         .args(["--client-spin-us", "100"])
-        // Issue 15's goals, short: one hog, 0.2 s idle.
+        // The scheduling goals, short: one hog, 0.2 s idle.
         .args(["--hogs", "1", "--idle-seconds", "0.2"])
         .arg("--out")
         .arg(&out)
@@ -45,7 +45,7 @@ fn latency_command_smoke_run() {
     assert!(stdout.contains("in-process `dyfos` query"), "{stdout}");
     assert!(stdout.contains("### Mixed"), "{stdout}");
     assert!(stdout.contains("(left) and with `--spin-us=50` (right)"), "{stdout}");
-    assert!(stdout.contains("### Targets of issue 15"), "{stdout}");
+    assert!(stdout.contains("### Targets: cheap requests while searches run"), "{stdout}");
     for goal in [
         "| stats requests (300/s",
         "| map requests (300/s",

@@ -1,6 +1,7 @@
 //! The numerical evaluation as tests: `dyfos` against `brute` on generated SPEC §10
-//! maps (issue 2's evidence), and a smoke run of `dyfos-bench numerical` so the
-//! command cannot rot. No timing is asserted; speed is in `bench/RESULTS.md`.
+//! maps (the evidence that the search reaches the grid optimum), and a smoke run of
+//! `dyfos-bench numerical` so the command cannot rot. No timing is asserted; speed is
+//! in `bench/RESULTS.md`.
 
 use dyfos_bench::evaluation::{Contender, evaluate};
 use dyfos_bench::numerical::{NumericalConfig, numerical_maps};

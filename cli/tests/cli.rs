@@ -130,7 +130,7 @@ fn no_feasible_pose_exits_3() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("no_feasible_pose"));
 }
 
-/// Regression (issue 11): `dyfos solve` printed `"x": [1.0, 3.94e-05, -7.08e-06, 2.85]`
+/// Regression: `dyfos solve` printed `"x": [1.0, 3.94e-05, -7.08e-06, 2.85]`
 /// and `dyfos eval --x` refused it (clap took `-7.08e-06` for a flag). Every number a
 /// command prints is now taken back by every numeric flag.
 #[test]

@@ -29,8 +29,8 @@ type StatsPort = ClientPort<Ipc, StatsRequest, (), StatsReply, ()>;
 /// How long a client polls for a reply without yielding its core, at most, before
 /// it polls yielding (`ClientConfig::spin`): long enough for the daemon to answer a
 /// check-mode, `stats` or map request (its IPC thread wakes at real-time priority),
-/// short enough to cost nothing next to a search (`bench/RESULTS.md`, "Cheap
-/// requests while searches run").
+/// short enough to cost nothing next to a search (`bench/RESULTS.md`, "Why the
+/// scheduling defaults").
 pub(crate) const HOT_SPIN: Duration = Duration::from_micros(50);
 
 /// How to reach the daemon.
@@ -43,10 +43,10 @@ pub struct ClientConfig {
     /// How long to poll for a reply (yielding the core between polls) before
     /// sleeping on the reply event; the client sleeps at once, after a 50 µs poll,
     /// while every core is taken (`dyfos_process::idle`). Replies within the window arrive without an event
-    /// wake-up, which costs 50–100 µs on a 2-core VM. The default, 1 ms, covers a
-    /// typical `dyfos` query (≈0.55 ms); longer windows cut a lone client's latency a
+    /// wake-up, which on a virtual machine goes through the host. The default, 1 ms,
+    /// covers a typical `dyfos` query; longer windows cut a lone client's latency a
     /// little more but cost throughput when more clients than cores poll at once
-    /// (`bench/RESULTS.md`, "Client spin window").
+    /// (`bench/RESULTS.md`, "Why the scheduling defaults").
     pub spin: Duration,
     /// iceoryx2 file prefix (its `global.prefix`, default `iox2_`): processes see each
     /// other only within one domain. `None` keeps iceoryx2's default. The daemon's
@@ -231,9 +231,9 @@ impl Connection {
                 // process's cheap request, by a time slice; sleeping on the reply
                 // event costs this wait a wake-up instead. This asks about the
                 // moment, not a load that lasts (`busy_lasting`): a wait looks too
-                // seldom to tell them apart, and yielding beside searches doubled
-                // the p99 of cheap requests (`bench/RESULTS.md`, "Polling stops for
-                // a load that lasts").
+                // seldom to tell them apart, and yielding beside searches lengthened
+                // the tail of cheap requests (`bench/RESULTS.md`, "Why the scheduling
+                // defaults").
                 std::thread::yield_now();
                 continue;
             }

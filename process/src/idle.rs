@@ -2,8 +2,8 @@
 //! of `dyfos-client`: polling for a reply (or a request) is only worth its CPU while a
 //! core is idle. When every core is taken, a poller that yields keeps a runnable
 //! thread in the scheduler's queue and delays whoever wakes next, often a robot
-//! process with a cheap request (`bench/RESULTS.md`, "Cheap requests while searches
-//! run"); sleeping on an event costs that one wait a wake-up (50–100 µs) instead.
+//! process with a cheap request (`bench/RESULTS.md`, "Why the scheduling defaults");
+//! sleeping on an event costs that one wait a wake-up instead.
 //!
 //! Two questions: [`IdleCores::busy`], whether every core is taken at this moment
 //! (a search asks it to make way for a thread that just woke), and
@@ -17,7 +17,7 @@ use std::cell::Cell;
 use std::time::{Duration, Instant};
 
 /// Whether other runnable threads fill every core, from the count of runnable
-/// threads in `/proc/loadavg` (kept open; one `pread` of a few bytes, about 2 µs),
+/// threads in `/proc/loadavg` (kept open; one `pread` of a few bytes),
 /// looked up at most every [`IdleCores::EVERY`]. Unknown (not Linux, no `/proc`)
 /// counts as not busy: the callers then poll as they did before.
 #[derive(Debug)]
@@ -38,7 +38,7 @@ impl IdleCores {
     /// How long every look must have said busy for [`IdleCores::busy_lasting`]:
     /// longer than a client's spin for its reply (50 µs) or a timed sender's spin
     /// before its send (150 µs in `dyfos-bench latency`), short next to a search
-    /// (0.5 ms and more) or a process that computes.
+    /// (over a thousand candidates) or a process that computes.
     pub const LASTING: Duration = Duration::from_micros(300);
 
     /// For a machine with `cores` cores.

@@ -41,8 +41,8 @@ pub const MAX_DELTAS_PER_MESSAGE: usize = 4096;
 /// Most records in one snapshot page the daemon sends (22.5 KiB). Smaller than
 /// [`MAX_DELTAS_PER_MESSAGE`] so that the daemon's map replies fit a fixed-size
 /// shared-memory segment: with a resizable one, iceoryx2 keeps chunk bookkeeping
-/// for 255 segments per connected client (8 MB of `/dev/shm` each, and 40 ms of the
-/// daemon's IPC thread when one connects or leaves).
+/// for 255 segments per connected client (8 MB of `/dev/shm` each, written and swept
+/// by the daemon's IPC thread when one connects or leaves).
 pub const SNAPSHOT_PAGE_RECORDS: usize = 256;
 
 /// Most delta records carried inline by one rendezvous request.

@@ -1,4 +1,4 @@
-//! Benchmark of the cross-host link (issue 14): the rendezvous → measurement round
+//! Benchmark of the cross-host link: the rendezvous → measurement round
 //! trip across two network namespaces joined by a veth pair, each with its own
 //! iceoryx2 domain and a `dyfos-link`, against the same round trip inside one
 //! domain (no link), in the same run; the links' memory; how long a killed and

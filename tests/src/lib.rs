@@ -308,8 +308,7 @@ pub fn slow_search_scenario() -> dyfos_shared::scenario::Scenario {
     // sight line ends 5 cm above it (the marker is at 20 cm), so none is blocked but
     // each walks the layer's blocks near its end, where no box test can settle it;
     // two cells at opposite corners make the grid's box span the whole search space,
-    // so no sight line is clipped away before its walk. About 3 s a `dyfos` search
-    // (1.7 ms a candidate, release build, 2024-era core).
+    // so no sight line is clipped away before its walk.
     let resolution = 0.05;
     let (side, top) = ((24.0 / resolution) as i64, (12.0 / resolution) as i64);
     let voxels = MapDelta::SetVoxels {

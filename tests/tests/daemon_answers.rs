@@ -248,7 +248,7 @@ impl WaitGuarded for std::process::Child {
     }
 }
 
-/// Regression (issue 11, found by an independent client): a query whose inline
+/// Regression (found by an independently written client): a query whose inline
 /// deltas were committed but whose search then failed replied `map_version 0`, so a
 /// client retrying with the version it was told got `map_version_mismatch`. Every
 /// reply now carries the version the request left the map at.
@@ -311,8 +311,7 @@ fn a_failed_query_reports_the_version_its_inline_deltas_made() {
     assert_eq!((unknown.status(), unknown.map_version()), (Some(Status::UnknownMap), None), "{unknown}");
 }
 
-/// `dyfos map upload --octomap`: OctoMap's real building map uploaded as a map's
-/// The issue 13 round trip through the client API: an OctoMap uploaded, queried,
+/// OctoMap's real building map through the client API: uploaded, queried,
 /// updated in batches (cells set occupied as 4³ blocks, cells freed as a cell list),
 /// the daemon killed (SIGKILL) with a torn record after its journal, restarted:
 /// the map comes back at the same version with the same cells, answers the same

@@ -1,4 +1,4 @@
-//! Cheap requests do not wait for searches (issue 15): with every worker busy
+//! Cheap requests do not wait for searches: with every worker busy
 //! searching (and one more query queued), a check-mode query, a `stats` request
 //! and a map snapshot are each answered while all the searches are still
 //! unanswered; and a queued query of a second client is taken before the queued

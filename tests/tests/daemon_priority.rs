@@ -1,8 +1,8 @@
 //! `dyfosd --worker-nice N`: the search workers run N nice levels below the thread
 //! that answers requests, so cheap queries preempt running searches
-//! (`bench/RESULTS.md`, latency: mixed run). By default the IPC thread sleeps at
-//! `SCHED_FIFO` 10 where the system allows it, else the workers are niced by 5
-//! (issue 15). Linux only: read from `/proc`.
+//! (`bench/RESULTS.md`, "Why the scheduling defaults"). By default the IPC thread
+//! sleeps at `SCHED_FIFO` 10 where the system allows it, else the workers are niced
+//! by 5. Linux only: read from `/proc`.
 
 #![cfg(target_os = "linux")]
 

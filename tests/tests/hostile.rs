@@ -619,7 +619,7 @@ fn maps_past_the_limit_are_refused_and_the_others_still_serve() {
     assert_eq!(create(10_000), Status::Ok);
 }
 
-/// Regression (issue 11): one misbehaving client decided how much the daemon wrote.
+/// Regression: one misbehaving client decided how much the daemon wrote.
 /// A client that drops its pending queries and sends again made the daemon log
 /// `rendezvous receive failed: ExceedsMaxBorrows` on every pass of its loop, and
 /// every reply while a killed client's listener was still registered made iceoryx2

@@ -1,4 +1,4 @@
-//! The rover and the viewer on two hosts (issue 14): two network namespaces made
+//! The rover and the viewer on two hosts: two network namespaces made
 //! by the test, joined by a veth pair, each host with its own iceoryx2 domain and
 //! a `dyfos-link`; `dyfosd`, the viewer and the evaluation's recorder on the
 //! viewer's host. Needs root (CI runs as root); otherwise each test prints a loud

@@ -148,7 +148,7 @@ fn valid_delta() -> impl Strategy<Value = MapDelta> {
             }),
         }),
         2 => (1u32..12).prop_map(|id| MapDelta::RemoveObstacle { id }),
-        2 => (prop::collection::vec([0i64..20, 0i64..20, 0i64..6], 0..6), any::<bool>()).prop_map(|(cells, occupied)| {
+        2 => (prop::collection::vec([0i64..20, 0i64..20, 0i64..6], 1..6), any::<bool>()).prop_map(|(cells, occupied)| {
             MapDelta::SetVoxels { resolution: 0.5, origin: na::Point3::new(-5.0, -5.0, 0.0), cells, occupied }
         }),
         1 => (-1.5..1.5f64, -3.0..3.0f64).prop_map(|(e, a)| MapDelta::SetSun(Sun::new(e, a).unwrap())),

@@ -1,4 +1,4 @@
-//! `dyfosd --record` and `dyfos replay` (issue 16): a recording daemon serves a
+//! `dyfosd --record` and `dyfos replay`: a recording daemon serves a
 //! soak-like mix from several clients (queries of every algorithm and mode, map
 //! uploads, deltas and inline deltas between them); the file is read back with the
 //! MCAP crate's reader (channels, schemas, message counts = what the clients got),

@@ -228,7 +228,7 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
         }
         // Victims are clients past their start (they have sent a request): a process
         // killed while iceoryx2 creates its node, or cleans up a dead one, can leave
-        // files iceoryx2 cannot clean (see the report in bench/RESULTS.md).
+        // files iceoryx2 cannot clean (bench/RESULTS.md, "Soak with chaos").
         let started: Vec<usize> = (0..live.len()).filter(|i| !read_log::<Record>(&live[*i].log).is_empty()).collect();
         if now >= next_client_kill && !started.is_empty() {
             let victim = live.swap_remove(started[rng.random_range(0..started.len())]);

@@ -38,7 +38,7 @@ def test_the_stub_names_what_the_extension_has() -> None:
 
 
 def test_the_documented_signatures() -> None:
-    """The names and defaults the issue fixes (others script against them)."""
+    """The documented names and defaults stay as they are (others script against them)."""
     sig = inspect.signature(dyfos.Client.rendezvous)
     expected = {
         "algorithm": "dyfos",

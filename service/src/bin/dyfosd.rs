@@ -89,7 +89,7 @@ struct Cli {
     /// request; `off` leaves the kernel's choice. Needs root (/dev/cpu_dma_latency).
     #[arg(long, value_name = "MICROS|off", value_parser = parse_cpu_latency)]
     cpu_latency_us: Option<CpuLatency>,
-    /// The scheduling of dyfosd before issue 15, for comparisons: no real-time IPC
+    /// dyfosd's earlier scheduling, for comparisons: no real-time IPC
     /// thread, a fixed --spin-us window, a FIFO queue, searches that never yield
     /// and keep the kernel's slice, idle cores as the kernel likes (same as
     /// `--ipc-priority 0 --spin-max-us 0 --queue fifo --worker-yield-us 0
@@ -326,7 +326,7 @@ mod tests {
         assert_eq!(c.worker_nice, 0);
         assert_eq!(config(&cli(&["--worker-nice", "10"])).unwrap().worker_nice, 10);
         assert!(Cli::try_parse_from(["dyfosd", "--worker-nice", "20"]).is_err());
-        // Issue 15's defaults, the legacy switch, and flags over it.
+        // The scheduling defaults, the legacy switch, and flags over it.
         let d = config(&cli(&[])).unwrap();
         assert_eq!((d.ipc_priority, d.spin_max, d.fair_queue), (10, Duration::from_millis(2), true));
         let legacy = config(&cli(&["--legacy-scheduling"])).unwrap();

@@ -1,15 +1,15 @@
-//! How fast an idle core wakes while traffic is steady (issue 15): a CPU latency
-//! request (Linux PM QoS, `/dev/cpu_dma_latency`) held only then.
+//! How fast an idle core wakes while traffic is steady: a CPU latency request
+//! (Linux PM QoS, `/dev/cpu_dma_latency`) held only then, so that a cheap request
+//! after a short pause is not charged an idle core's wake-up.
 //!
 //! A request that finds the IPC thread asleep wakes it on a core that is idle, and
-//! an idle core sleeps in a power state it takes time to leave: 40–75 µs on a
-//! virtual machine (the halt goes through the host), tens to hundreds of µs from a
-//! deep C-state on bare metal. At 0 µs the idle loop polls instead and a wake-up
-//! takes 3–4 µs (`bench/RESULTS.md`, "Idle cores that poll while traffic is
-//! steady"). Polling idle cores cost power, so the request is held only while
-//! requests arrive steadily (when the IPC thread polls anyway) and released
-//! [`CpuLatency::RELEASE_AFTER`] after the last one. The kernel drops it when the
-//! file closes, so a daemon that dies leaves nothing behind.
+//! an idle core sleeps in a power state it takes time to leave (on a virtual
+//! machine the halt goes through the host; on bare metal, a deep C-state). At 0 µs
+//! the idle loop polls instead and a wake-up needs no interrupt at all
+//! (`bench/RESULTS.md`, "What a wake-up costs"). Polling idle cores cost power, so
+//! the request is held only while requests arrive steadily (when the IPC thread
+//! polls anyway) and released [`CpuLatency::RELEASE_AFTER`] after the last one. The
+//! kernel drops it when the file closes, so a daemon that dies leaves nothing behind.
 
 use std::io::Write;
 use std::path::Path;

@@ -2,11 +2,12 @@
 //!
 //! iceoryx2 frees a killed client's resources, and so lets the daemon see that the
 //! client has gone, only when a process of the domain runs a dead-node cleanup. A
-//! cleanup walks the domain's nodes and takes milliseconds (about 20 ms on a 2-core
-//! VM, `bench/RESULTS.md`). On the real-time IPC thread that would hold every
-//! request, and the whole core, for as long. This thread runs it at normal priority
-//! with a node of its own (any node of the domain may clean up after a dead one) and
-//! raises a flag; the IPC thread then looks for searches whose clients have gone.
+//! cleanup walks the domain's nodes and takes milliseconds. On the real-time IPC
+//! thread that would hold every request, and the whole core, for as long
+//! (`bench/RESULTS.md`, "Why the scheduling defaults"). This thread runs it at
+//! normal priority with a node of its own (any node of the domain may clean up after
+//! a dead one) and raises a flag; the IPC thread then looks for searches whose
+//! clients have gone.
 
 use super::Ipc;
 use iceoryx2::prelude::*;

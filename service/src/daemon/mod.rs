@@ -29,7 +29,7 @@
 //! client always finds a free worker. Free workers take queries fairly across
 //! clients ([`DaemonConfig::fair_queue`]).
 //!
-//! Priorities (issue 15): the IPC thread sleeps at `SCHED_FIFO`
+//! Priorities: the IPC thread sleeps at `SCHED_FIFO`
 //! ([`DaemonConfig::ipc_priority`]), so a request wakes it ahead of running
 //! searches, and polls for the next request at normal priority, for a window that
 //! grows to [`DaemonConfig::spin_max`] while traffic is steady and is zero while
@@ -129,7 +129,7 @@ pub struct DaemonConfig {
     /// the IPC thread's priority keeps it (and the clients) off the CPU for a time
     /// slice, so a cheap query waits behind the searches; lower-priority workers are
     /// preempted at once, but also yield to every other process of normal priority
-    /// (`bench/RESULTS.md`, latency: mixed run).
+    /// (`bench/RESULTS.md`, "Why the scheduling defaults").
     pub worker_nice: u8,
     /// `SCHED_FIFO` priority of the IPC thread while it sleeps (1–99,
     /// `--ipc-priority`, default [`DEFAULT_IPC_PRIORITY`]; 0: never real-time). A
@@ -156,7 +156,7 @@ pub struct DaemonConfig {
     /// one (`--worker-yield-us`, default [`DEFAULT_WORKER_YIELD`]; zero: never). A
     /// process that wakes while searches run every core would otherwise often wait
     /// for the next scheduler tick (4 ms at 250 Hz); with it, at most this long.
-    /// A search looks every 64 candidates (≈ 50 µs) and yields only while more
+    /// A search looks every 64 candidates (tens of µs) and yields only while more
     /// threads are runnable than there are cores and it has had most of its core
     /// lately (so CPU hogs do not get its share). Linux only; elsewhere it never
     /// yields.
@@ -170,7 +170,7 @@ pub struct DaemonConfig {
     /// While requests arrive steadily, ask that idle cores wake within this many µs
     /// (`--cpu-latency-us`, default 0: they poll; `None`: off), released 50 ms after
     /// the last request. A request after a pause then finds the IPC thread's core
-    /// awake in µs, not the 40–75 µs a virtual machine's idle core takes. Needs
+    /// awake at once, not halted in a power state it takes time to leave. Needs
     /// root (`/dev/cpu_dma_latency`); without, the daemon says so once and goes on.
     pub cpu_latency_us: Option<u32>,
     /// Record the daemon's traffic to an MCAP file (`--record`; default off).
@@ -182,10 +182,10 @@ pub struct DaemonConfig {
 pub const DEFAULT_IPC_PRIORITY: u8 = 10;
 
 /// How often, at most, a search yields its core to a waiting thread by default: at
-/// every checkpoint (≈ 50 µs) while the conditions hold. With 200 µs the p99 of
-/// cheap requests beside the searches was longer in 14 of 15 comparisons (1.6 × at
-/// the median, from the send), for the same throughput (`bench/RESULTS.md`,
-/// "Searches yield at every checkpoint").
+/// every checkpoint while the conditions hold, so a thread that wakes beside a
+/// search waits for one checkpoint at most. Yielding less often lengthened the tail
+/// of cheap requests beside the searches for the same throughput (`bench/RESULTS.md`,
+/// "Why the scheduling defaults").
 pub const DEFAULT_WORKER_YIELD: Duration = Duration::from_micros(50);
 
 /// The search workers' time slice by default: above the kernel's default slice
@@ -544,8 +544,9 @@ impl Daemon {
         let rendezvous_server = create_server!(rendezvous.server_builder());
         // A fixed-size segment of snapshot-page-sized replies: iceoryx2 keeps the
         // bookkeeping of a resizable segment for all of its 255 possible segments per
-        // connected client (8 MB of /dev/shm per client, and ~40 ms of this thread each
-        // time one connects or leaves, stalling every other client's requests).
+        // connected client (8 MB of /dev/shm per client, written and swept by this
+        // thread each time one connects or leaves, stalling every other client's
+        // requests).
         let map_server = create_server!(
             map.server_builder()
                 .initial_max_slice_len(SNAPSHOT_PAGE_RECORDS)
@@ -557,11 +558,11 @@ impl Daemon {
         let waitset = WaitSetBuilder::new().create::<Ipc>().map_err(ipc_err)?;
         // Attached once, for the daemon's life. iceoryx2 0.10's `attach` reads
         // /proc/sys/fs/epoll/max_user_watches every time, so attaching and detaching
-        // around each sleep made 6 of the 10 system calls of a wake-up: ≈ 8 µs on a
-        // cloud VM, at real-time priority, on a core whose client may be waiting for
-        // it to sleep again (bench/RESULTS.md, "The IPC thread's wake-up"). Forgetting
-        // the guard only skips its detach: the wait set and the listener go together
-        // when the daemon is dropped. It is the wait set's only attachment, so any
+        // around each sleep made 6 of the 10 system calls of a wake-up, at real-time
+        // priority, on a core whose client may be waiting for it to sleep again
+        // (bench/RESULTS.md, "Why the scheduling defaults"). Forgetting the guard
+        // only skips its detach: the wait set and the listener go together when the
+        // daemon is dropped. It is the wait set's only attachment, so any
         // event it reports is a wake-up (an attachment id would not do: iceoryx2's
         // ids hold the wait set's address, which changes when the daemon moves).
         std::mem::forget(waitset.attach_notification(&wake).map_err(ipc_err)?);
@@ -796,10 +797,9 @@ impl Daemon {
     /// thread that yields waits a whole time slice behind the busy ones, where a
     /// sleeping one is woken ahead of them (real-time, or above the niced workers).
     /// A client that spins a moment for its reply does not end the poll: stopping
-    /// for it cost the next request a wake-up (in 14–21 % of the requests at
-    /// 1 000/s, `bench/RESULTS.md`, "Polling stops for a load that lasts"). A
-    /// non-zero window returns the thread to normal priority first, so its polling
-    /// yields to every other thread.
+    /// for it cost the next request a wake-up (`bench/RESULTS.md`, "Why the
+    /// scheduling defaults"). A non-zero window returns the thread to normal
+    /// priority first, so its polling yields to every other thread.
     pub fn poll_window(&mut self) -> Duration {
         let window = if self.steady() { self.config.spin_max } else { self.config.spin };
         if window.is_zero() || self.ipc_scheduling == IpcScheduling::Off {

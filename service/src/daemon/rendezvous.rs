@@ -357,7 +357,7 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
 }
 
 /// The checkpoint of a search on worker `worker`, every
-/// [`Evaluator::CLOCK_EVERY`](crate::search::Evaluator::CLOCK_EVERY) candidates (≈ 50 µs):
+/// [`Evaluator::CLOCK_EVERY`](crate::search::Evaluator::CLOCK_EVERY) candidates (tens of µs):
 ///
 /// - it **makes way**: when more threads are runnable than there are cores and the
 ///   thread has not yielded for [`Shared::worker_yield`], it yields its core. The
@@ -365,8 +365,7 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
 ///   at the next tick (4 ms at 250 Hz) unless the waking thread was owed time at
 ///   that instant; a robot process that just sent a request usually is not. A
 ///   yield lets the scheduler pick it within `worker_yield`; the search goes on
-///   when it is its turn again (`bench/RESULTS.md`, "Cheap requests while searches
-///   run").
+///   when it is its turn again (`bench/RESULTS.md`, "Why the scheduling defaults").
 /// - it **holds** the search while the IPC thread asked it to give its core to a
 ///   starved query (see [`Queue`]; fair queue, not `brute`).
 struct WorkerCheckpoint<'s> {
@@ -392,7 +391,7 @@ impl WorkerCheckpoint<'_> {
     /// scheduler's fair share, under which this thread has no more than
     /// [`MAKE_WAY_ABOVE`] of its core; a yield forfeits the rest of its time
     /// slice, so yielding to them too would hand them most of the search's share
-    /// (`bench/RESULTS.md`: CPU hogs).
+    /// (`bench/RESULTS.md`, "Why the scheduling defaults").
     fn make_way(&self) {
         let every = self.shared.worker_yield;
         if every.is_zero() {

@@ -1,4 +1,4 @@
-//! Scheduling of the daemon's threads (issue 15): the IPC thread sleeps at a
+//! Scheduling of the daemon's threads: the IPC thread sleeps at a
 //! real-time priority, so a request that wakes it preempts running searches at once,
 //! and polls at normal priority, so its polling never takes a core from anything.
 //! Where real-time is refused it asks for a short time slice instead, and the search

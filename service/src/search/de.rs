@@ -25,8 +25,9 @@
 //! on the wrong side of the rover, where an axis-aligned noise model (`anisotropic`,
 //! `learned`) has the same shape and only glare and obstacles differ. The first
 //! polish, a compass search ([`Polish::Compass`]), stalled on the ridge |u| = |v| of
-//! the image error and spent its evaluations walking flat directions;
-//! `bench/RESULTS.md` compares the three in one run.
+//! the image error and spent its evaluations walking flat directions. Today's
+//! figures: `bench/RESULTS.md`, "Numerical"; the runs that chose between the three
+//! polishes: `bench/history/2026-11.md`.
 
 use super::{Evaluator, Search, SearchControl, SearchOutcome};
 use crate::lupp::Lupp;
@@ -48,7 +49,7 @@ pub enum Polish {
     /// Compass search: ± each axis at one shared step (1/32 of the box at first);
     /// on each axis the first improving direction is taken; the step halves after a
     /// sweep without an improvement, down to 1e-5. The first `dyfos` default, kept
-    /// for comparison (`bench/RESULTS.md`).
+    /// for comparison (`bench/history/2026-11.md`).
     Compass {
         /// Most evaluations.
         evaluations: u64,

@@ -1,5 +1,6 @@
 //! The synthetic reference camera: the "true" measurement noise of the learned-model
-//! experiments (issue 7). Training data are drawn from it, and planning quality is
+//! experiments, a camera whose formula is known so a trained model can be judged
+//! against it (`dyfos-bench learned`). Training data are drawn from it, and planning quality is
 //! judged by it; the `learned` model never sees its formula, only samples.
 //!
 //! It is `anisotropic` made deliberately different from the linear `paper` model in

@@ -1,4 +1,4 @@
-//! `dyfos-bench latency`: query latency and throughput of `dyfosd` (issue 5).
+//! `dyfos-bench latency`: query latency and throughput of `dyfosd`.
 //!
 //! Starts its own `dyfosd` (found next to this executable; own service prefix,
 //! iceoryx2 domain and temporary state directory), uploads the SPEC §10 numerical
@@ -79,7 +79,7 @@ pub struct LatencyArgs {
     /// event (`ClientConfig::spin`), µs; default: the client library's default.
     #[arg(long)]
     client_spin_us: Option<u64>,
-    /// Skip the runs of issue 15's goals (`stats` and map requests beside `dyfos`
+    /// Skip the runs of the scheduling goals (`stats` and map requests beside `dyfos`
     /// clients, CPU hogs, a greedy client, idle CPU); they also run against the
     /// `--compare-daemon-arg` daemon.
     #[arg(long)]
@@ -889,7 +889,7 @@ fn goal_hogs(a: &LatencyArgs) -> Option<usize> {
     (h > 0).then_some(h)
 }
 
-/// The configurations of issue 15's goals that both daemons run (the null mix is
+/// The configurations of the scheduling goals that both daemons run (the null mix is
 /// the mixed run): `stats` and map requests beside the `dyfos` clients, those
 /// clients alone and beside CPU hogs, and a greedy client beside one `dyfos` client.
 fn goal_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
@@ -1008,13 +1008,14 @@ fn pick(rows: &[Row], w: Workload, clients: usize, rate: Option<f64>, beside: Op
 /// One goal's cell from a daemon's rows and idle CPU: the text, and whether met.
 type GoalCell<'a> = dyn Fn(&[Row], Option<f64>) -> (String, Option<bool>) + 'a;
 
-/// Issue 15's goals, one row each, for the daemon of the run and (if any) the
-/// `--compare-daemon-arg` one; "met" is for the first.
+/// The scheduling goals (cheap requests while searches run), one row each, for the
+/// daemon of the run and (if any) the `--compare-daemon-arg` one; "met" is for the
+/// first.
 fn goals(a: &LatencyArgs, rows: &[Row], idle: Option<f64>, other: Option<(&[Row], Option<f64>)>) -> String {
     let n = a.mixed_dyfos_clients.max(1);
     let rate = if a.mixed_null_rate > 0.0 { a.mixed_null_rate } else { 1000.0 };
     let flags = a.compare_daemon_args.join(" ");
-    let mut out = String::from("\n### Targets of issue 15 (cheap requests while searches run)\n\n");
+    let mut out = String::from("\n### Targets: cheap requests while searches run\n\n");
     if other.is_some() {
         let _ = writeln!(out, "| target | dyfosd as above | with `{flags}` | met |\n|---|---|---|---|");
     } else {

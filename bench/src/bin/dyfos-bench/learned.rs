@@ -1,5 +1,5 @@
 //! `dyfos-bench learned`: the learned SDSMM against the synthetic reference camera it
-//! was trained on (issue 7): held-out NLL, fit of the standard deviations (with plots
+//! was trained on: held-out NLL, fit of the standard deviations (with plots
 //! across the image), planning quality on the SPEC §10 maps judged by the true model,
 //! and query time.
 

@@ -29,14 +29,14 @@ enum Command {
     /// Query latency and throughput of dyfosd (closed and open loop, N client
     /// processes), against the in-process call and iceoryx2's raw round trip.
     Latency(latency::LatencyArgs),
-    /// OctoMap maps (issue 13): query cost per candidate against cylinder maps, and,
+    /// OctoMap maps: query cost per candidate against cylinder maps, and,
     /// through dyfosd, loading a building `.bt`, 10 000-cell updates, a restart.
     Octomap(octomap::OctomapArgs),
     /// One client process of `latency` (started by it).
     #[command(hide = true)]
     LatencyWorker(latency::WorkerArgs),
     /// The learned SDSMM against the synthetic camera it was trained on: held-out
-    /// NLL, std plots, planning judged by the true model, query time (issue 7).
+    /// NLL, std plots, planning judged by the true model, query time.
     Learned(learned::LearnedArgs),
 }
 

@@ -1,4 +1,4 @@
-//! `dyfos-bench octomap`: OctoMap maps (issue 13). `dyfos` query cost per candidate
+//! `dyfos-bench octomap`: OctoMap maps. `dyfos` query cost per candidate
 //! on the real Freiburg map and on a synthetic building against cylinder maps, in
 //! process; then, through a real `dyfosd`, loading a building `.bt`, 10 000-cell
 //! updates, a restart and queries, with bytes per cell and the daemon's memory.
