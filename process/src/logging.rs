@@ -182,7 +182,7 @@ pub fn init_with(default: &str, limited: &'static [&'static str], tallies: &'sta
             }
         });
     }
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+    iceoryx2_log::set_log_level_from_env_or(iceoryx2_log::LogLevel::Warn);
 }
 
 /// Writes the summaries of the windows that are over, and of the one still open,
