@@ -19,11 +19,11 @@
 use crate::Failure;
 use crate::hosts::{ROVER_ENDPOINT, TwoHosts};
 use anyhow::{Context, anyhow, bail};
+use dyfos_client::{Client, ClientConfig};
 use dyfos_mission::eval::{ApeStats, McapMission, McapProfile, MissionTrace, Recorder, mean_std, render_svg};
 use dyfos_mission::mission::Mission;
 use dyfos_mission::mission::log::read_events;
 use dyfos_mission::mission::topics::TopicsConfig;
-use dyfos_client::{Client, ClientConfig};
 use dyfos_process::shutdown;
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::params::ModelKind;

@@ -5,9 +5,9 @@
 //! bad flags or credentials; 1 otherwise (Zenoh or iceoryx2 failure).
 
 use clap::Parser;
-use dyfos_process::shutdown;
 use dyfos_link::health::{Counts, Health, TALLIES};
 use dyfos_link::{Link, LinkConfig, LinkStartError, Side};
+use dyfos_process::shutdown;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;

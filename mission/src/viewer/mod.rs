@@ -49,7 +49,9 @@ use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknow
 use crate::mission::topics::{Inbox, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
 use crate::rover::{MISSION, SIM};
 use crate::sim::{CameraView, Flight, FlightLimits, SimCamera, SimClock, stream_seed, streams};
-use dyfos_client::{Client, ClientConfig, ClientOpenError, MapRequestError, RendezvousError, RendezvousRequest, Status};
+use dyfos_client::{
+    Client, ClientConfig, ClientOpenError, MapRequestError, RendezvousError, RendezvousRequest, Status,
+};
 use dyfos_shared::answer::{Algorithm, Answer};
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::sdsmm::{Learned, NoiseModel, NoiseModelError};

@@ -104,11 +104,7 @@ impl Tally {
 }
 
 /// Replays one recording, reporting what it finds line by line to `report`.
-pub fn replay_file(
-    path: &Path,
-    options: &ReplayOptions,
-    report: &mut dyn FnMut(&str),
-) -> Result<Tally, ReplayError> {
+pub fn replay_file(path: &Path, options: &ReplayOptions, report: &mut dyn FnMut(&str)) -> Result<Tally, ReplayError> {
     let bytes = std::fs::read(path).map_err(|source| ReplayError::Read { path: path.to_owned(), source })?;
     let stream = mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
         .map_err(|error| ReplayError::NotMcap { path: path.to_owned(), error })?;
@@ -367,8 +363,11 @@ impl Replay<'_> {
         };
         // The recorded deadline only ever stopped the search early, and this one did
         // not stop at it: replay without one.
-        let control =
-            SearchControl { budget: request.budget, threads: self.options.threads, ..SearchControl::seeded(request.seed) };
+        let control = SearchControl {
+            budget: request.budget,
+            threads: self.options.threads,
+            ..SearchControl::seeded(request.seed)
+        };
         let Some(reply) = answer_query(world, &request, request_id, self.learned, &control) else {
             report(&format!("{name}: {label}: the search was abandoned; not replayed"));
             t.unreplayable += 1;
