@@ -411,15 +411,20 @@ mod tests {
         assert!(lines.is_empty(), "{lines:?}");
     }
 
+    /// The MCAP reader finds the bad magic at the first record, not on opening: such a
+    /// file replays nothing and is reported as truncated (incomplete, `dyfos replay`
+    /// exits 4), as the command always did.
     #[test]
-    fn a_file_that_is_not_mcap_is_refused_before_any_report() {
+    fn a_file_that_is_not_mcap_replays_nothing_and_is_incomplete() {
         let path = scratch("not-mcap.mcap");
         std::fs::write(&path, b"{\"not\": \"mcap\"}").unwrap();
         let mut lines = Vec::new();
-        let err = replay_file(&path, &ReplayOptions::default(), &mut |l| lines.push(l.to_string())).unwrap_err();
-        assert!(matches!(err, ReplayError::NotMcap { .. }), "{err:?}");
-        assert!(err.to_string().contains("is not an MCAP file"), "{err}");
-        assert!(lines.is_empty(), "{lines:?}");
+        let t = replay_file(&path, &ReplayOptions::default(), &mut |l| lines.push(l.to_string())).unwrap();
+        assert_eq!(t, Tally { truncated: true, ..Tally::default() });
+        assert!(t.incomplete());
+        assert_eq!(lines.len(), 2, "{lines:?}");
+        assert!(lines[0].contains("truncated after 0 messages"), "{lines:?}");
+        assert!(lines[1].ends_with("recording truncated after 0 messages"), "{lines:?}");
     }
 
     #[test]
