@@ -15,6 +15,11 @@
 //! links it compiles neither a log subscriber nor clap.
 #![warn(missing_docs)]
 
+// iceoryx2-bb-posix (signals, in `shutdown`) logs through iceoryx2-log, which
+// needs a logger linked in; a process that links this crate but not iceoryx2 gets
+// the one iceoryx2 would give it.
+extern crate iceoryx2_bb_loggers as _;
+
 #[cfg(feature = "cli")]
 pub mod cli;
 pub mod idle;
