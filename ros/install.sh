@@ -3,6 +3,7 @@
 # distribution and no setup script needed.
 #
 #   bash ros/install.sh [VENV]      # default VENV: target/ros-venv
+#   bash ros/install.sh --prepare [VENV]   # steps 1-4 only (no binding, no node)
 #
 # Afterwards `VENV/bin/dyfos-ros` runs the node (`--ros-args -p prefix:=dyfos/ ...`) and
 # `VENV/bin/python` imports rclpy, dyfos, dyfos_msgs, octomap_msgs and dyfos_ros, with
@@ -30,6 +31,12 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/.." && pwd)"
 target="${CARGO_TARGET_DIR:-$root/target}"
 # Absolute: the builds below run in other directories.
+prepare=0
+if [ "${1:-}" = "--prepare" ]; then
+    # What needs no workspace build: scripts/test runs it while cargo builds.
+    prepare=1
+    shift
+fi
 venv="$(realpath -m "${1:-$target/ros-venv}")"
 python="${PYTHON:-python3}"
 distro=jazzy
@@ -118,6 +125,10 @@ build_interfaces() {
 }
 build_interfaces octomap_msgs
 build_interfaces dyfos_msgs
+if [ "$prepare" = 1 ]; then
+    step "prepared (wheels and interfaces; run without --prepare for the binding and the node)"
+    exit 0
+fi
 
 # 5. The binding.
 site="$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
