@@ -29,6 +29,8 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/.." && pwd)"
+# shellcheck source=scripts/venv.sh
+source "$root/scripts/venv.sh"
 target="${CARGO_TARGET_DIR:-$root/target}"
 # Absolute: the builds below run in other directories.
 prepare=0
@@ -80,10 +82,8 @@ build=(
 )
 wheels_stamp="$venv/.dyfos-ros-wheels"
 wheels_want="${runtime[*]} ${build[*]} setuptools wheel"
-if [ ! -x "$venv/bin/python" ]; then
-    step "creating the venv $venv"
-    "$python" -m venv "$venv"
-fi
+step "the venv $venv"
+make_venv "$python" "$venv"
 if [ "$(cat "$wheels_stamp" 2>/dev/null)" != "$wheels_want" ]; then
     step "installing ROS 2 $distro wheels into $venv"
     pip "${runtime[@]}" "${build[@]}" setuptools wheel

@@ -734,12 +734,15 @@ impl Writer {
             return self.write_head(file).map_err(OpenError::Write);
         }
         let partial = partial_path(&self.config.path);
-        let file = File::create(&partial).map_err(OpenError::Create)?;
-        self.write_head(file).map_err(OpenError::Write)?;
-        // The full file is finished only now, just before it is renamed away.
+        let head = File::create(&partial)
+            .map_err(OpenError::Create)
+            .and_then(|file| self.write_head(file).map_err(OpenError::Write));
+        // The full file is finished only now, just before it is renamed away, and also
+        // when the next one could not be started: it keeps its summary either way.
         if let Some(mut f) = full {
             f.mcap.finish().map_err(OpenError::Write)?;
         }
+        head?;
         self.shift().map_err(OpenError::Create)?;
         std::fs::rename(&partial, &self.config.path).map_err(OpenError::Create)
     }
