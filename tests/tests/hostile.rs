@@ -636,7 +636,7 @@ fn a_misbehaving_client_cannot_flood_the_daemons_log() {
     // Both patterns go on for at least 3 s and until the daemon has seen the first
     // (at most 30 s). The second makes iceoryx2 warn only when the dead listener's
     // slot comes before the live one's, which this test cannot choose; the limit on
-    // iceoryx2's lines is shown by `dyfos_client::logging`'s unit test.
+    // iceoryx2's lines is shown by `dyfos_process::logging`'s unit test.
     let done = AtomicBool::new(false);
     let brute =
         RendezvousRequest { algorithm: Algorithm::Brute, params: s.params, ..RendezvousRequest::new(1, s.belief) };

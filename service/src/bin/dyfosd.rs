@@ -133,7 +133,7 @@ fn main() -> ExitCode {
         },
         Err(e) => e.exit(),
     };
-    dyfos_client::logging::init();
+    dyfos_process::logging::init();
     let config = match config(&cli) {
         Ok(c) => c,
         Err(e) => {
@@ -149,7 +149,7 @@ fn main() -> ExitCode {
         Ok(daemon) => {
             serve(daemon);
             // Say how many lines the rate limit left out in the last window.
-            dyfos_client::logging::flush();
+            dyfos_process::logging::flush();
             ExitCode::SUCCESS
         }
         Err(e) => {
@@ -166,7 +166,7 @@ mod tests {
 
     #[test]
     fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
-        dyfos_client::cli::assert_numeric_flags_take_signs(&Cli::command());
+        dyfos_process::cli::assert_numeric_flags_take_signs(&Cli::command());
     }
 
     fn cli(args: &[&str]) -> Cli {

@@ -267,8 +267,8 @@ pub struct Daemon {
     /// The CPU latency request, held while traffic is steady.
     cpu_latency: cpu_latency::CpuLatency,
     /// Whether other work fills every core (and has for a while), looked up at most
-    /// every [`IdleCores::EVERY`](dyfos_client::idle::IdleCores::EVERY).
-    cores: dyfos_client::idle::IdleCores,
+    /// every [`IdleCores::EVERY`](dyfos_process::idle::IdleCores::EVERY).
+    cores: dyfos_process::idle::IdleCores,
     /// The recorder's writer thread, if recording.
     recorder_thread: Option<JoinHandle<()>>,
     /// The dead-process cleanup, off the IPC thread.
@@ -505,7 +505,7 @@ impl Daemon {
                 config.scheduling.cpu_latency_us.micros(),
                 std::path::Path::new(cpu_latency::CpuLatency::DEVICE),
             ),
-            cores: dyfos_client::idle::IdleCores::new(cores),
+            cores: dyfos_process::idle::IdleCores::new(cores),
             recorder_thread,
             janitor,
         })
@@ -622,7 +622,7 @@ impl Daemon {
     /// it sleeps: [`Scheduling::poll_max_us`] while requests arrive about that often,
     /// else [`Scheduling::poll_us`]. Unless real-time scheduling is off, zero while
     /// every worker searches or other threads have filled every core for a while
-    /// ([`IdleCores::LASTING`](dyfos_client::idle::IdleCores::LASTING)): a polling
+    /// ([`IdleCores::LASTING`](dyfos_process::idle::IdleCores::LASTING)): a polling
     /// thread that yields waits a whole time slice behind the busy ones, where a
     /// sleeping one is woken ahead of them (real-time, or above the niced workers).
     /// A client that spins a moment for its reply does not end the poll: stopping

@@ -399,7 +399,7 @@ impl WorkerCheckpoint<'_> {
         }
         share.update(now, super::sched::thread_cpu_time());
         SHARE.set(Some(share));
-        if share.recent >= MAKE_WAY_ABOVE && CORES.with(dyfos_client::idle::IdleCores::busy) {
+        if share.recent >= MAKE_WAY_ABOVE && CORES.with(dyfos_process::idle::IdleCores::busy) {
             std::thread::yield_now();
         }
     }
@@ -407,7 +407,7 @@ impl WorkerCheckpoint<'_> {
 
 thread_local! {
     /// Whether the machine's cores are all taken, for [`WorkerCheckpoint::make_way`].
-    static CORES: dyfos_client::idle::IdleCores = dyfos_client::idle::IdleCores::of_this_machine();
+    static CORES: dyfos_process::idle::IdleCores = dyfos_process::idle::IdleCores::of_this_machine();
     /// How much of its core this thread had in its searches lately.
     static SHARE: Cell<Option<CoreShare>> = const { Cell::new(None) };
 }
@@ -559,7 +559,8 @@ fn run(shared: &Shared, watch: &Watch, job: Job, checkpoint: Option<&dyn Checkpo
         }
     }
     debug!(request_id, status = reply.status, micros, map = request.map, version = world.version(), "query answered");
-    send(shared, &active, reply, reply_to);
+    // Recorded before it is sent: a query a client sends after this reply is
+    // recorded after it, whichever thread answers it.
     if let Some(recorder) = &shared.recorder {
         recorder.record(Record::Rendezvous {
             received: unix_ns_of(received),
@@ -570,6 +571,7 @@ fn run(shared: &Shared, watch: &Watch, job: Job, checkpoint: Option<&dyn Checkpo
             reply: Box::new(reply),
         });
     }
+    send(shared, &active, reply, reply_to);
 }
 
 /// Searches for an accepted query's answer in `world` (the map after the query's
@@ -703,7 +705,6 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
         Ok(Accepted::Checked(version, recorded)) => {
             let mut reply = RendezvousReply::checked(request_id, version);
             reply.daemon_micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
-            send(&daemon.shared, &active, reply, reply_to);
             if let (Some(recorder), Some(request)) = (&daemon.shared.recorder, recorded) {
                 recorder.record(Record::Rendezvous {
                     received: unix_ns_of(received),
@@ -714,6 +715,7 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
                     reply: Box::new(reply),
                 });
             }
+            send(&daemon.shared, &active, reply, reply_to);
         }
         Ok(Accepted::Queued(request, world)) => {
             let client = active.origin().value();
