@@ -249,7 +249,8 @@ fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
     // The snapshot equals `dyfos map snapshot`'s, but for the CLI's `map` field.
     let snapshot = sections.iter().find(|(n, _)| n.starts_with("snapshot ")).expect("a snapshot").1.clone();
     let ours: serde_json::Value = serde_json::from_str(&snapshot).expect("snapshot JSON");
-    let mut cli: serde_json::Value = serde_json::from_str(&at_kill.snapshot.expect("the CLI's snapshot")).expect("JSON");
+    let mut cli: serde_json::Value =
+        serde_json::from_str(&at_kill.snapshot.expect("the CLI's snapshot")).expect("JSON");
     cli.as_object_mut().expect("an object").remove("map");
     assert_eq!(ours, cli);
     // The map after `[{"clear": {}}]` and the file of every delta kind: what the same
