@@ -3,6 +3,7 @@
 # distribution and no setup script needed.
 #
 #   bash ros/install.sh [VENV]      # default VENV: target/ros-venv
+#   bash ros/install.sh --prepare [VENV]   # steps 1-4 only (no binding, no node)
 #
 # Afterwards `VENV/bin/dyfos-ros` runs the node (`--ros-args -p prefix:=dyfos/ ...`) and
 # `VENV/bin/python` imports rclpy, dyfos, dyfos_msgs, octomap_msgs and dyfos_ros, with
@@ -28,8 +29,16 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/.." && pwd)"
+# shellcheck source=scripts/venv.sh
+source "$root/scripts/venv.sh"
 target="${CARGO_TARGET_DIR:-$root/target}"
 # Absolute: the builds below run in other directories.
+prepare=0
+if [ "${1:-}" = "--prepare" ]; then
+    # What needs no workspace build: scripts/test runs it while cargo builds.
+    prepare=1
+    shift
+fi
 venv="$(realpath -m "${1:-$target/ros-venv}")"
 python="${PYTHON:-python3}"
 distro=jazzy
@@ -73,10 +82,8 @@ build=(
 )
 wheels_stamp="$venv/.dyfos-ros-wheels"
 wheels_want="${runtime[*]} ${build[*]} setuptools wheel"
-if [ ! -x "$venv/bin/python" ]; then
-    step "creating the venv $venv"
-    "$python" -m venv "$venv"
-fi
+step "the venv $venv"
+make_venv "$python" "$venv"
 if [ "$(cat "$wheels_stamp" 2>/dev/null)" != "$wheels_want" ]; then
     step "installing ROS 2 $distro wheels into $venv"
     pip "${runtime[@]}" "${build[@]}" setuptools wheel
@@ -118,6 +125,10 @@ build_interfaces() {
 }
 build_interfaces octomap_msgs
 build_interfaces dyfos_msgs
+if [ "$prepare" = 1 ]; then
+    step "prepared (wheels and interfaces; run without --prepare for the binding and the node)"
+    exit 0
+fi
 
 # 5. The binding.
 site="$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"

@@ -22,6 +22,8 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
+# shellcheck source=scripts/venv.sh
+source "$root/scripts/venv.sh"
 target="${CARGO_TARGET_DIR:-$root/target}"
 venv="$target/py-venv"
 python="${PYTHON:-python3}"
@@ -31,9 +33,7 @@ if [ "${1:-}" = "--maturin" ]; then
     shift
 fi
 
-if [ ! -x "$venv/bin/python" ]; then
-    "$python" -m venv "$venv"
-fi
+make_venv "$python" "$venv"
 if ! "$venv/bin/python" -c "import pytest, numpy" 2>/dev/null; then
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "pytest>=7" numpy
 fi

@@ -12,13 +12,13 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/../.." && pwd)"
+# shellcheck source=scripts/venv.sh
+source "$root/scripts/venv.sh"
 target="${CARGO_TARGET_DIR:-$root/target}"
 venv="$target/ros2-mcap-venv"
 python="${PYTHON:-python3}"
 
-if [ ! -x "$venv/bin/python" ]; then
-    "$python" -m venv "$venv"
-fi
+make_venv "$python" "$venv"
 if ! "$venv/bin/python" -c "import pytest, mcap, mcap_ros2" 2>/dev/null; then
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
         "pytest>=7" "mcap>=1.1,<2" "mcap-ros2-support>=0.5,<1"

@@ -44,6 +44,8 @@ dyfos_cli = pyconftest.dyfos_cli
 
 #: How long any wait in these tests may take before the test fails.
 PATIENCE = 30.0
+#: A service call unanswered this long is sent again (see :meth:`Ros.call`).
+RESEND_AFTER = 10.0
 DYFOS_ROS = os.environ.get("DYFOS_ROS") or str(Path(sys.executable).parent / "dyfos-ros")
 FASTDDS = str(Path(sys.executable).parent / "fastdds")
 DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "dyfos-ros-test-domains"
@@ -143,10 +145,22 @@ class Ros:
             self.executor.spin_once(timeout_sec=0.02)
 
     def call(self, srv_type: Any, name: str, request: Any, timeout: float = PATIENCE) -> Any:
+        """One answer to ``request``. A service is "ready" once it sees our requests, but
+        its reply may still find no reader on our side (Fast DDS: "failed to send response
+        (timeout): client will not receive response"), so a call unanswered for
+        ``RESEND_AFTER`` is sent again; the queries are idempotent."""
         client = self.client(srv_type, name, timeout)
-        future = client.call_async(request)
-        self.spin_until(future.done, timeout, f"the answer of {name}")
-        return future.result()
+        end = time.monotonic() + timeout
+        while True:
+            future = client.call_async(request)
+            wait = min(RESEND_AFTER, end - time.monotonic())
+            try:
+                self.spin_until(future.done, max(wait, 0.0), f"the answer of {name}")
+                return future.result()
+            except AssertionError:
+                client.remove_pending_request(future)
+                if time.monotonic() >= end:
+                    raise AssertionError(f"timed out after {timeout} s waiting for the answer of {name}") from None
 
     def client(self, srv_type: Any, name: str, timeout: float = PATIENCE) -> Any:
         client = self.node.create_client(srv_type, name)

@@ -75,6 +75,14 @@ impl RecordConfig {
     }
 }
 
+/// `FILE.mcap` → `FILE.mcap.part`: where a file's head is written before the file
+/// takes its name.
+fn partial_path(path: &Path) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(".part");
+    PathBuf::from(name)
+}
+
 /// `FILE.mcap` → `FILE.<index>.mcap`; 0 is `path` itself.
 pub fn rotated_path(path: &Path, index: usize) -> PathBuf {
     if index == 0 {
@@ -536,7 +544,6 @@ impl Recorder {
         let dropped = Arc::new(AtomicU64::new(0));
         let stopped = Arc::new(AtomicBool::new(false));
         let mut writer = Writer::new(config, daemon_config, maps, Arc::clone(&dropped));
-        writer.rotate_existing()?;
         match writer.open() {
             Ok(()) => {}
             // A path that cannot be created is a mistake to see at start.
@@ -683,11 +690,6 @@ impl Writer {
         }
     }
 
-    /// Moves a file left by an earlier run out of the way (rotating like a full one).
-    fn rotate_existing(&self) -> std::io::Result<()> {
-        if self.is_regular() { self.shift() } else { Ok(()) }
-    }
-
     /// Whether the recording's path is a regular file: only those are rotated
     /// (`--record /dev/…` writes to the device as it is, never renames it).
     fn is_regular(&self) -> bool {
@@ -716,10 +718,31 @@ impl Writer {
         Ok(())
     }
 
-    /// Creates the current file and writes its head.
+    /// Starts the next current file: writes its head, finishes the full one if any,
+    /// rotates the file there (the full one, or one left by an earlier run) away and
+    /// puts the new one in its place.
+    /// The head is written under a temporary name first, so a daemon killed at any
+    /// moment never leaves a current file without its head (at most a
+    /// `FILE.mcap.part`, which the next start overwrites), and the name is without a
+    /// current file only between two renames.
     fn open(&mut self) -> Result<(), OpenError> {
-        let file = File::create(&self.config.path).map_err(OpenError::Create)?;
-        self.write_head(file).map_err(OpenError::Write)
+        let full = self.file.take();
+        if std::fs::symlink_metadata(&self.config.path).is_ok_and(|m| !m.is_file()) {
+            let file = File::create(&self.config.path).map_err(OpenError::Create)?;
+            return self.write_head(file).map_err(OpenError::Write);
+        }
+        let partial = partial_path(&self.config.path);
+        let head = File::create(&partial)
+            .map_err(OpenError::Create)
+            .and_then(|file| self.write_head(file).map_err(OpenError::Write));
+        // The full file is finished only now, just before it is renamed away, and also
+        // when the next one could not be started: it keeps its summary either way.
+        if let Some(mut f) = full {
+            f.mcap.finish().map_err(OpenError::Write)?;
+        }
+        head?;
+        self.shift().map_err(OpenError::Create)?;
+        std::fs::rename(&partial, &self.config.path).map_err(OpenError::Create)
     }
 
     fn write_head(&mut self, file: File) -> Result<(), mcap::McapError> {
@@ -849,10 +872,6 @@ impl Writer {
         if !full || !self.is_regular() {
             return Ok(());
         }
-        if let Some(mut f) = self.file.take() {
-            f.mcap.finish()?;
-        }
-        self.shift()?;
         self.file_index += 1;
         self.open().map_err(|e| match e {
             OpenError::Create(e) => e.into(),

@@ -564,7 +564,8 @@ fn run(shared: &Shared, watch: &Watch, job: Job, checkpoint: Option<&dyn Checkpo
         }
     }
     debug!(request_id, status = reply.status, micros, map = request.map, version = world.version(), "query answered");
-    send(shared, &active, reply, reply_to);
+    // Recorded before it is sent: a query a client sends after this reply is
+    // recorded after it, whichever thread answers it.
     if let Some(recorder) = &shared.recorder {
         recorder.record(Record::Rendezvous {
             received: unix_ns_of(received),
@@ -575,6 +576,7 @@ fn run(shared: &Shared, watch: &Watch, job: Job, checkpoint: Option<&dyn Checkpo
             reply: Box::new(reply),
         });
     }
+    send(shared, &active, reply, reply_to);
 }
 
 /// Searches for an accepted query's answer in `world` (the map after the query's
@@ -708,7 +710,6 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
         Ok(Accepted::Checked(version, recorded)) => {
             let mut reply = RendezvousReply::checked(request_id, version);
             reply.daemon_micros = u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX);
-            send(&daemon.shared, &active, reply, reply_to);
             if let (Some(recorder), Some(request)) = (&daemon.shared.recorder, recorded) {
                 recorder.record(Record::Rendezvous {
                     received: unix_ns_of(received),
@@ -719,6 +720,7 @@ pub(super) fn on_request(daemon: &mut Daemon, active: RendezvousActive) {
                     reply: Box::new(reply),
                 });
             }
+            send(&daemon.shared, &active, reply, reply_to);
         }
         Ok(Accepted::Queued(request, world)) => {
             let client = active.origin().value();
