@@ -39,6 +39,7 @@ pub mod sim;
 pub mod viewer;
 
 pub use client::{Client, ClientConfig};
+pub use dyfos_shared::wire::map::MapInfo;
 pub use dyfos_shared::wire::rendezvous::{RendezvousCheck, RendezvousRequest};
 pub use dyfos_shared::wire::stats::DaemonStats;
 pub use dyfos_shared::wire::{DEFAULT_PREFIX, Rejection, Status};
@@ -51,7 +52,7 @@ pub type Ipc = iceoryx2::prelude::ipc_threadsafe::Service;
 /// Client, requests, answers, map deltas, errors and `nalgebra`, in one `use`.
 pub mod prelude {
     pub use crate::{
-        Client, ClientConfig, ClientOpenError, DaemonStats, MapRequestError, Rejection, RendezvousCheck,
+        Client, ClientConfig, ClientOpenError, DaemonStats, MapInfo, MapRequestError, Rejection, RendezvousCheck,
         RendezvousError, RendezvousRequest, StatsRequestError, Status,
     };
     pub use dyfos_shared::prelude::*;
