@@ -144,6 +144,13 @@ pub enum MapCommand {
         #[command(flatten)]
         daemon: DaemonArgs,
     },
+    /// List the daemon's maps in id order, one JSON object a line: `map`, `version`,
+    /// `generation`, `bounds`, `sun`. Nothing if it holds none. Maps made or deleted
+    /// while it lists may or may not be in the list.
+    List {
+        #[command(flatten)]
+        daemon: DaemonArgs,
+    },
 }
 
 /// Flags of `dyfos stats`.
@@ -258,6 +265,12 @@ pub fn map(command: &MapCommand) -> Result<(), Failure> {
         MapCommand::Delete { id, expected_version, daemon } => {
             daemon.connect()?.delete_map(*id, *expected_version, daemon.timeout()?).map_err(map_failure)?;
             crate::print_json(&serde_json::json!({"map": id, "deleted": true}));
+        }
+        MapCommand::List { daemon } => {
+            let maps = daemon.connect()?.list_maps(daemon.timeout()?).map_err(map_failure)?;
+            for map in maps {
+                println!("{}", map.to_json());
+            }
         }
     }
     Ok(())

@@ -4,9 +4,9 @@ use crate::Ipc;
 use crate::error::{CallError, ClientOpenError, MapRequestError, RendezvousError, StatsRequestError};
 use dyfos_process::idle::IdleCores;
 use dyfos_shared::answer::Answer;
-use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS};
+use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS, MAX_MAPS};
 use dyfos_shared::wire::map::{
-    MapId, MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, decode_deltas, world_chunks,
+    MapId, MapInfo, MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, decode_deltas, world_chunks,
 };
 use dyfos_shared::wire::rendezvous::{
     Mode, RendezvousCheck, RendezvousReply, RendezvousRequest, RendezvousRequestHeader,
@@ -642,6 +642,35 @@ impl Client {
     ) -> Result<(), MapRequestError> {
         self.map_call(&MapRequest::Delete { map, expected_version }, timeout)?;
         Ok(())
+    }
+
+    /// Every map the daemon holds, in id order: one request per map, each asking
+    /// for the first map after the last one described (docs/wire.md §9), all within
+    /// `timeout`. Not a snapshot of one moment: a map made or deleted meanwhile may
+    /// or may not be in the list. A listing that goes on past [`MAX_MAPS`] maps
+    /// (maps made faster than they are listed) is refused with
+    /// `map_version_mismatch`: retry.
+    pub fn list_maps(&mut self, timeout: Duration) -> Result<Vec<MapInfo>, MapRequestError> {
+        let start = Instant::now();
+        let mut maps: Vec<MapInfo> = Vec::new();
+        let mut from: MapId = 0;
+        // One more request than maps: the last says there are no more.
+        for _ in 0..=MAX_MAPS {
+            let left = timeout.saturating_sub(start.elapsed());
+            let (reply, _) = self.map_call(&MapRequest::List { from }, left)?;
+            let Some(info) = MapInfo::from_list_reply(from, &reply).map_err(MapRequestError::Invalid)? else {
+                return Ok(maps);
+            };
+            maps.push(info);
+            match info.id.checked_add(1) {
+                Some(next) => from = next,
+                None => return Ok(maps),
+            }
+        }
+        Err(MapRequestError::Rejected(Rejection::new(
+            Status::MapVersionMismatch,
+            format!("the daemon's maps kept changing while they were listed (more than {MAX_MAPS} seen); retry"),
+        )))
     }
 
     /// The daemon's health and counters.

@@ -170,7 +170,7 @@ request_error!(
     "rendezvous"
 );
 request_error!(
-    /// Why a map operation (create, apply, upload, snapshot, delete) failed.
+    /// Why a map operation (create, apply, upload, snapshot, delete, list) failed.
     MapRequestError,
     "map"
 );

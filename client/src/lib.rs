@@ -29,6 +29,7 @@ mod client;
 mod error;
 
 pub use client::{Client, ClientConfig, iceoryx_config};
+pub use dyfos_shared::wire::map::MapInfo;
 pub use dyfos_shared::wire::rendezvous::{RendezvousCheck, RendezvousRequest};
 pub use dyfos_shared::wire::stats::DaemonStats;
 pub use dyfos_shared::wire::{DEFAULT_PREFIX, Rejection, Status};
@@ -41,7 +42,7 @@ pub type Ipc = iceoryx2::prelude::ipc_threadsafe::Service;
 /// Client, requests, answers, map deltas, errors and `nalgebra`, in one `use`.
 pub mod prelude {
     pub use crate::{
-        Client, ClientConfig, ClientOpenError, DaemonStats, MapRequestError, Rejection, RendezvousCheck,
+        Client, ClientConfig, ClientOpenError, DaemonStats, MapInfo, MapRequestError, Rejection, RendezvousCheck,
         RendezvousError, RendezvousRequest, StatsRequestError, Status,
     };
     pub use dyfos_shared::prelude::*;

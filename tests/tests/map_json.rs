@@ -65,6 +65,26 @@ fn every_delta_kind_applies_and_a_snapshot_reads_back_as_its_map() {
     let (_, copied) = snapshot(&sandbox, "9");
     assert!(copied.same_content(&expected));
     let _ = std::fs::remove_file(&copy);
+
+    // `dyfos map list`: one JSON object a line, in id order, each map as its snapshot
+    // shows it; a deleted map is gone from it.
+    let list = || {
+        let out = map(&sandbox, ["list"]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let text = String::from_utf8(out.stdout).unwrap();
+        text.lines()
+            .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+            .collect::<Vec<serde_json::Value>>()
+    };
+    let listed: Vec<serde_json::Value> = list();
+    assert_eq!(listed.iter().map(|m| m["map"].as_u64().unwrap()).collect::<Vec<_>>(), [7, 8, 9]);
+    for (m, world) in listed.iter().zip([&got, &uploaded, &copied]) {
+        let shown = dyfos_shared::map_json::map_to_json(None, world);
+        assert_eq!((&m["version"], &m["bounds"], &m["sun"]), (&shown["version"], &shown["bounds"], &shown["sun"]));
+        assert_ne!(m["generation"], 0, "{m}");
+    }
+    ok(map(&sandbox, ["delete", "8"]));
+    assert_eq!(list().iter().map(|m| m["map"].as_u64().unwrap()).collect::<Vec<_>>(), [7, 9]);
 }
 
 #[test]

@@ -291,3 +291,110 @@ fn map_requests_are_checked_in_the_documented_order() {
     }
     assert_eq!(client.snapshot(1, PATIENCE).unwrap().version(), 0, "nothing changed the map");
 }
+
+/// A list request describes the map with the smallest id at or after its cursor and
+/// counts the maps from there; walking the cursor from 0 lists every map in id
+/// order (docs/wire.md §9). Listing is never an error, so it moves no failure
+/// counter; a list request with flags or records is refused.
+#[test]
+fn listing_walks_the_maps_in_id_order_and_is_never_an_error() {
+    let sandbox = Sandbox::new("maplist");
+    let _daemon = sandbox.start_daemon(&[]);
+    let raw = RawClient::open(&sandbox);
+    let mut client = sandbox.client();
+    let list = |from: MapId| {
+        let (reply, records) = raw.map(MapRequest::List { from }.header(from ^ 0x5a5a, [0, 0]), &[]);
+        assert_eq!((status(&reply), reply.request_id), (Status::Ok, from ^ 0x5a5a), "{}", reply.detail.text());
+        assert!(records.is_empty());
+        reply
+    };
+    // Every map, by the walk: from 0, then from the id described + 1.
+    let walk = || {
+        let mut described = Vec::new();
+        let mut from = 0;
+        loop {
+            let reply = list(from);
+            if reply.chunk_count == 0 {
+                return described;
+            }
+            assert!(reply.map_id >= from, "{reply:?}");
+            described.push(reply);
+            from = reply.map_id + 1;
+        }
+    };
+    let nothing = |reply: &MapReplyHeader, from: MapId| {
+        assert_eq!((reply.chunk_count, reply.map_id, reply.version, reply.generation), (0, from, 0, 0));
+        assert_eq!((reply.bounds, reply.sun), ([0.0; 4], [0.0; 2]));
+    };
+    nothing(&list(0), 0);
+    assert!(walk().is_empty(), "no maps yet");
+
+    let big = u64::MAX - 1;
+    let wide = Bounds::new([-20.0, -5.0, 20.0, 5.0]).unwrap();
+    client.create_map(big, wide, sun(), PATIENCE).unwrap();
+    client.create_map(0, bounds(), sun(), PATIENCE).unwrap();
+    client.create_map(77, bounds(), sun(), PATIENCE).unwrap();
+    client.apply(77, Some(0), &[pole(1, 1.0), MapDelta::SetSun(Sun::new(0.4, -1.0).unwrap())], PATIENCE).unwrap();
+
+    let before = client.stats(PATIENCE).unwrap();
+    let maps = walk();
+    let seen: Vec<_> = maps.iter().map(|r| (r.map_id, r.chunk_count, r.version)).collect();
+    assert_eq!(seen, [(0, 3, 0), (77, 2, 2), (big, 1, 0)]);
+    assert_eq!((maps[1].bounds, maps[1].sun), (bounds().to_array(), [0.4, -1.0]));
+    assert_eq!((maps[2].bounds, maps[2].sun), (wide.to_array(), [0.7, 2.1]));
+    let generations: Vec<u32> = maps.iter().map(|r| r.generation).collect();
+    assert!(generations.iter().all(|g| *g != 0), "{generations:?}");
+    // A cursor between ids, and past the last: no error either.
+    let between = list(1);
+    assert_eq!((between.map_id, between.chunk_count, between.version), (77, 2, 2));
+    assert_eq!(list(78).map_id, big);
+    nothing(&list(u64::MAX), u64::MAX);
+    let after = client.stats(PATIENCE).unwrap();
+    assert_eq!((after.requests_failed, &after.errors), (before.requests_failed, &before.errors));
+    assert_eq!(after.map_requests, before.map_requests + 4 + 3, "every list step is a map request served");
+
+    // Deleted, the map is no longer listed; made again, it has another generation.
+    client.delete_map(77, None, PATIENCE).unwrap();
+    assert_eq!(walk().iter().map(|r| r.map_id).collect::<Vec<_>>(), [0, big]);
+    assert_eq!((list(1).map_id, list(1).chunk_count), (big, 1));
+    client.create_map(77, bounds(), sun(), PATIENCE).unwrap();
+    let again = list(1);
+    assert_eq!((again.map_id, again.version), (77, 0));
+    assert_ne!(again.generation, generations[1], "a map made again under its id");
+
+    // Flags or records: refused, and counted as failures (the counter does move).
+    let header = MapRequest::List { from: 0 }.header(9, [0, 0]);
+    let (flagged, _) = raw.map(MapRequestHeader { flags: 1, ..header }, &[]);
+    assert_eq!(status(&flagged), Status::MalformedRequest, "{}", flagged.detail.text());
+    assert!(flagged.detail.text().contains("list: flags"), "{}", flagged.detail.text());
+    let (carrying, _) = raw.map(header, &encode_deltas(&[MapDelta::Clear]));
+    assert_eq!(status(&carrying), Status::MalformedRequest, "{}", carrying.detail.text());
+    assert!(carrying.detail.text().contains("list carries no records"), "{}", carrying.detail.text());
+    assert_eq!(client.stats(PATIENCE).unwrap().requests_failed, before.requests_failed + 2);
+}
+
+/// `Client::list_maps` walks the whole id range, both ends included, and describes
+/// each map as a snapshot shows it.
+#[test]
+fn the_client_lists_every_map_as_its_snapshot_shows_it() {
+    let sandbox = Sandbox::new("maplistc");
+    let _daemon = sandbox.start_daemon(&[]);
+    let mut client = sandbox.client();
+    assert_eq!(client.list_maps(PATIENCE).unwrap(), []);
+    let ids = [u64::MAX, 0, u64::MAX - 1, 1 << 40];
+    for (k, id) in ids.iter().enumerate() {
+        let b = Bounds::new([-1.0 - k as f64, -1.0, 1.0, 1.0 + k as f64]).unwrap();
+        client.create_map(*id, b, sun(), PATIENCE).unwrap();
+    }
+    client.apply(u64::MAX, None, &[pole(3, 0.5), MapDelta::SetSun(Sun::new(-0.1, 3.0).unwrap())], PATIENCE).unwrap();
+    let listed = client.list_maps(PATIENCE).unwrap();
+    assert_eq!(listed.iter().map(|m| m.id).collect::<Vec<_>>(), [0, 1 << 40, u64::MAX - 1, u64::MAX]);
+    for m in &listed {
+        let world = client.snapshot(m.id, PATIENCE).unwrap();
+        assert_eq!((m.version, m.bounds, m.sun), (world.version(), *world.bounds(), *world.sun()), "map {}", m.id);
+    }
+    assert_eq!(listed[3].version, 2);
+    client.delete_map(1 << 40, None, PATIENCE).unwrap();
+    let left: Vec<MapId> = client.list_maps(PATIENCE).unwrap().iter().map(|m| m.id).collect();
+    assert_eq!(left, [0, u64::MAX - 1, u64::MAX]);
+}

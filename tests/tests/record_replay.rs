@@ -41,7 +41,8 @@ impl Drop for Dir {
 struct Sent {
     /// Accepted queries (answers, checks, worker-side refusals).
     queries: u64,
-    /// Accepted map requests (create, apply, upload chunks, snapshot pages, delete).
+    /// Accepted map requests (create, apply, upload chunks, snapshot pages, delete,
+    /// list steps).
     map_requests: u64,
     /// Map changes (create, apply, upload, inline deltas, delete).
     map_changes: u64,
@@ -184,11 +185,13 @@ fn drive(sandbox: &Sandbox, per_client: u64) -> Sent {
             }
         });
     });
-    // A snapshot (one page) and a deletion.
+    // A snapshot (one page), a deletion and a listing (one step per map, and the last).
     admin.snapshot(3, TIMEOUT).expect("snapshot");
     admin.delete_map(2, None, TIMEOUT).expect("delete");
+    let listed = admin.list_maps(TIMEOUT).expect("list").len() as u64;
+    assert_eq!(listed, maps.len() as u64 - 1);
     let mut s = sent.lock().unwrap();
-    s.map_requests += 2;
+    s.map_requests += 2 + listed + 1;
     s.map_changes += 1;
     std::mem::take(&mut *s)
 }
@@ -223,6 +226,21 @@ fn a_recorded_run_replays_identically_and_a_changed_parameter_shows() {
     for cause in ["create", "upload", "apply", "inline", "delete"] {
         assert!(causes.contains(&cause), "no `{cause}` change in {causes:?}");
     }
+    // The listing's steps: from 0, then past each map described, the last describing none.
+    let steps: Vec<(u64, u64, u64)> = messages[topics::MAP]
+        .iter()
+        .filter(|m| m["kind"] == "list")
+        .map(|m| {
+            (
+                m["map"].as_u64().unwrap(),
+                m["reply"]["map"].as_u64().unwrap(),
+                m["reply"]["chunk_count"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(steps.len(), 3, "{steps:?}");
+    assert_eq!((steps[0].0, steps[0].2, steps[2].2), (0, 2, 0), "{steps:?}");
+    assert_eq!((steps[1].0, steps[1].2), (steps[0].1 + 1, 1), "{steps:?}");
     let modes: Vec<&str> = messages[topics::RENDEZVOUS].iter().map(|m| m["mode"].as_str().unwrap_or("?")).collect();
     assert!(modes.contains(&"check") && modes.contains(&"solve"), "{modes:?}");
 

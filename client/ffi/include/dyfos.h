@@ -65,6 +65,12 @@
 #define DYFOS_MAX_INLINE_RECORDS 1024u
 
 /**
+ * Most maps one daemon holds: a `dyfos_map_info` array of this many entries holds
+ * every map `dyfos_client_list_maps` describes.
+ */
+#define DYFOS_MAX_MAPS 256u
+
+/**
  * Differential evolution with a final local polish (the DyFOS optimizer).
  */
 #define DYFOS_ALGORITHM_DYFOS 0u
@@ -410,6 +416,38 @@ typedef struct dyfos_rendezvous_request {
    */
   const char *deltas_json;
 } dyfos_rendezvous_request;
+
+/**
+ * One map the daemon holds, as `dyfos_client_list_maps` describes it.
+ */
+typedef struct dyfos_map_info {
+  /**
+   * The map's id.
+   */
+  uint64_t map;
+  /**
+   * Its version (the version counts deltas, not batches).
+   */
+  uint64_t version;
+  /**
+   * Its bounds: x_min, y_min, x_max, y_max, m.
+   */
+  double bounds[4];
+  /**
+   * Its sun's elevation, rad.
+   */
+  double sun_elevation;
+  /**
+   * Its sun's azimuth, rad.
+   */
+  double sun_azimuth;
+  /**
+   * Its generation, a number the daemon picks when the map is made (created,
+   * uploaded, or loaded at start): a map deleted and made again under its id,
+   * back at version 0, has another one.
+   */
+  uint32_t generation;
+} dyfos_map_info;
 
 /**
  * Candidates evaluated, split by the first constraint that rejected them.
@@ -859,11 +897,8 @@ dyfos_status dyfos_client_snapshot(struct dyfos_client *client,
  * `expected_version` other than `DYFOS_ANY_VERSION`, the map must be at that
  * version (else `DYFOS_STATUS_MAP_VERSION_MISMATCH`, nothing deleted);
  * `DYFOS_STATUS_UNKNOWN_MAP` if no map has the id. The id is free again after:
- * e.g. upload a scenario again after deleting its content-id map.
- *
- * The daemon has no request listing the maps it holds (docs/wire.md §9): keep
- * the ids you create or upload; `maps` in `dyfos_client_stats` says how many it
- * holds.
+ * e.g. upload a scenario again after deleting its content-id map
+ * (`dyfos_client_list_maps` finds the ids the daemon holds).
  *
  * # Safety
  * Always safe to call: no pointer but the handle, which is never dereferenced.
@@ -872,6 +907,30 @@ dyfos_status dyfos_client_delete_map(struct dyfos_client *client,
                                      uint64_t timeout_ms,
                                      uint64_t map,
                                      uint64_t expected_version);
+
+/**
+ * Lists the maps the daemon holds, in id order: writes the first `capacity` of
+ * them to `maps_out[0 .. capacity]` and their number to `*count_out`. If that
+ * number is larger than `capacity`, only the first `capacity` maps were written
+ * (ask again with a larger array); an array of `DYFOS_MAX_MAPS` entries always
+ * holds every map. `maps_out` may be NULL when `capacity` is 0, to ask the number
+ * only. On failure nothing is written.
+ *
+ * The daemon describes one map per request (docs/wire.md §9), so this call makes
+ * one request per map, all within the call's timeout. The list is not a snapshot
+ * of one moment: a map made or deleted while it is walked may or may not be in it.
+ * A walk that meets more than `DYFOS_MAX_MAPS` maps (maps made faster than they
+ * are listed) is `DYFOS_STATUS_MAP_VERSION_MISMATCH`: call again.
+ *
+ * # Safety
+ * `maps_out` is NULL (refused unless `capacity` is 0) or points to `capacity`
+ * writable `dyfos_map_info`; `count_out` is NULL (refused) or writable.
+ */
+dyfos_status dyfos_client_list_maps(struct dyfos_client *client,
+                                    uint64_t timeout_ms,
+                                    struct dyfos_map_info *maps_out,
+                                    size_t capacity,
+                                    size_t *count_out);
 
 /**
  * Asks the daemon for the optimal sensor pose for `*request` and writes it to

@@ -379,6 +379,17 @@ struct MapVersion {
   std::uint64_t version;
 };
 
+/// A map held by the daemon, as Client::list_maps describes it.
+struct MapInfo {
+  std::uint64_t map = 0;
+  std::uint64_t version = 0;
+  /// Another one if the map was deleted and made again under its id (back at version 0).
+  std::uint32_t generation = 0;
+  std::array<double, 4> bounds{};  ///< x_min, y_min, x_max, y_max, m
+  double sun_elevation = 0.0;      ///< rad
+  double sun_azimuth = 0.0;        ///< rad
+};
+
 /// A connection to one dyfosd. Move-only; closed by the destructor (which waits for
 /// a call in progress on another thread). Any method may be called from several
 /// threads at once: the library serialises the calls of one client (one request at
@@ -412,7 +423,7 @@ class Client {
   using Timeout = std::optional<std::chrono::milliseconds>;
 
   /// The daemon's health and counters, as the JSON `dyfos stats` prints (`maps`:
-  /// how many it holds; the daemon has no list of their ids).
+  /// how many it holds; list_maps lists them).
   std::string stats_json(Timeout timeout = std::nullopt) const {
     char* json = nullptr;
     detail::check(dyfos_client_stats(live("stats_json"), detail::timeout_ms(timeout), &json));
@@ -475,6 +486,30 @@ class Client {
                   Timeout timeout = std::nullopt) {
     detail::check(dyfos_client_delete_map(live("delete_map"), detail::timeout_ms(timeout), map,
                                           expected_version.value_or(DYFOS_ANY_VERSION)));
+  }
+
+  /// Every map the daemon holds, in id order (one request per map, all within the
+  /// timeout). Maps made or deleted while it lists may or may not be in the list.
+  std::vector<MapInfo> list_maps(Timeout timeout = std::nullopt) const {
+    std::vector<dyfos_map_info> raw(DYFOS_MAX_MAPS);
+    std::size_t count = 0;
+    detail::check(
+        dyfos_client_list_maps(live("list_maps"), detail::timeout_ms(timeout), raw.data(), raw.size(), &count));
+    // At most DYFOS_MAX_MAPS are described; never read past what was written.
+    if (count < raw.size()) raw.resize(count);
+    std::vector<MapInfo> maps;
+    maps.reserve(raw.size());
+    for (const dyfos_map_info& m : raw) {
+      MapInfo info;
+      info.map = m.map;
+      info.version = m.version;
+      info.generation = m.generation;
+      for (std::size_t i = 0; i < 4; ++i) info.bounds[i] = m.bounds[i];
+      info.sun_elevation = m.sun_elevation;
+      info.sun_azimuth = m.sun_azimuth;
+      maps.push_back(info);
+    }
+    return maps;
   }
 
   /// The optimal sensor pose for `request`.

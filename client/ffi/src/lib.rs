@@ -406,11 +406,8 @@ pub unsafe extern "C" fn dyfos_client_snapshot(
 /// `expected_version` other than `DYFOS_ANY_VERSION`, the map must be at that
 /// version (else `DYFOS_STATUS_MAP_VERSION_MISMATCH`, nothing deleted);
 /// `DYFOS_STATUS_UNKNOWN_MAP` if no map has the id. The id is free again after:
-/// e.g. upload a scenario again after deleting its content-id map.
-///
-/// The daemon has no request listing the maps it holds (docs/wire.md §9): keep
-/// the ids you create or upload; `maps` in `dyfos_client_stats` says how many it
-/// holds.
+/// e.g. upload a scenario again after deleting its content-id map
+/// (`dyfos_client_list_maps` finds the ids the daemon holds).
 ///
 /// # Safety
 /// Always safe to call: no pointer but the handle, which is never dereferenced.
@@ -424,6 +421,46 @@ pub unsafe extern "C" fn dyfos_client_delete_map(
     on_handle(client, |handle| {
         let expected = (expected_version != DYFOS_ANY_VERSION).then_some(expected_version);
         handle.call(timeout_ms, |c, t| Ok(c.delete_map(map, expected, t)?))
+    })
+}
+
+/// Lists the maps the daemon holds, in id order: writes the first `capacity` of
+/// them to `maps_out[0 .. capacity]` and their number to `*count_out`. If that
+/// number is larger than `capacity`, only the first `capacity` maps were written
+/// (ask again with a larger array); an array of `DYFOS_MAX_MAPS` entries always
+/// holds every map. `maps_out` may be NULL when `capacity` is 0, to ask the number
+/// only. On failure nothing is written.
+///
+/// The daemon describes one map per request (docs/wire.md §9), so this call makes
+/// one request per map, all within the call's timeout. The list is not a snapshot
+/// of one moment: a map made or deleted while it is walked may or may not be in it.
+/// A walk that meets more than `DYFOS_MAX_MAPS` maps (maps made faster than they
+/// are listed) is `DYFOS_STATUS_MAP_VERSION_MISMATCH`: call again.
+///
+/// # Safety
+/// `maps_out` is NULL (refused unless `capacity` is 0) or points to `capacity`
+/// writable `dyfos_map_info`; `count_out` is NULL (refused) or writable.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dyfos_client_list_maps(
+    client: *mut dyfos_client,
+    timeout_ms: u64,
+    maps_out: *mut dyfos_map_info,
+    capacity: usize,
+    count_out: *mut usize,
+) -> dyfos_status {
+    on_handle(client, |handle| {
+        non_null(count_out, "count_out")?;
+        if capacity > 0 {
+            non_null(maps_out, "maps_out")?;
+        }
+        let maps = handle.call(timeout_ms, |c, t| Ok(c.list_maps(t)?))?;
+        for (i, map) in maps.iter().take(capacity).enumerate() {
+            // SAFETY: `maps_out` is non-null (checked above, as `capacity` > 0) and
+            // points to `capacity` writable entries, as the caller promises; i < capacity.
+            unsafe { maps_out.add(i).write(dyfos_map_info::from(map)) };
+        }
+        // SAFETY: non-null (checked above) and writable, as the caller promises.
+        unsafe { write(count_out, "count_out", maps.len()) }
     })
 }
 
@@ -769,6 +806,7 @@ mod tests {
                     dyfos_client_apply(handle, 0, 1, std::ptr::null(), 0, std::ptr::null_mut()),
                     dyfos_client_snapshot(handle, 0, 1, std::ptr::null_mut()),
                     dyfos_client_delete_map(handle, 0, 1, 0),
+                    dyfos_client_list_maps(handle, 0, std::ptr::null_mut(), 5, std::ptr::null_mut()),
                     dyfos_client_rendezvous(handle, 0, &bad_request, &mut answer),
                     dyfos_client_rendezvous(handle, 0, std::ptr::null(), std::ptr::null_mut()),
                     dyfos_client_check(handle, 0, &bad_request, std::ptr::null_mut()),

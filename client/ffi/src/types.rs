@@ -1,5 +1,6 @@
-//! The plain C structs of the API (parameters, rendezvous request, answer), their
-//! codes, and their conversions to and from the Rust client's types.
+//! The plain C structs of the API (parameters, rendezvous request, answer, map
+//! description), their codes, and their conversions to and from the Rust client's
+//! types.
 
 use crate::status::{
     DYFOS_STATUS_INVALID_ALGORITHM, DYFOS_STATUS_INVALID_BELIEF, DYFOS_STATUS_MALFORMED_DELTA,
@@ -10,6 +11,7 @@ use dyfos_shared::math::{Matrix3, Point3, UnitQuaternion, canonical_xyzw, rows3}
 use dyfos_shared::params::Params;
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::sensor::SensorState;
+use dyfos_shared::wire::map::MapInfo;
 use dyfos_shared::wire::rendezvous::{RendezvousRequest, WireParams};
 use dyfos_shared::world::MapDelta;
 use std::ffi::{CStr, c_char};
@@ -28,6 +30,10 @@ pub const DYFOS_MAX_BATCH_RECORDS: u32 = 4096u32;
 /// for `DYFOS_MAX_BATCH_RECORDS`; more is `DYFOS_STATUS_OVER_CAPACITY`, nothing sent):
 /// apply larger batches with `dyfos_client_apply` first.
 pub const DYFOS_MAX_INLINE_RECORDS: u32 = 1024u32;
+
+/// Most maps one daemon holds: a `dyfos_map_info` array of this many entries holds
+/// every map `dyfos_client_list_maps` describes.
+pub const DYFOS_MAX_MAPS: u32 = 256u32;
 
 /// Differential evolution with a final local polish (the DyFOS optimizer).
 pub const DYFOS_ALGORITHM_DYFOS: u32 = 0u32;
@@ -375,6 +381,39 @@ pub struct dyfos_answer {
     pub micros: u64,
 }
 
+/// One map the daemon holds, as `dyfos_client_list_maps` describes it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct dyfos_map_info {
+    /// The map's id.
+    pub map: u64,
+    /// Its version (the version counts deltas, not batches).
+    pub version: u64,
+    /// Its bounds: x_min, y_min, x_max, y_max, m.
+    pub bounds: [f64; 4],
+    /// Its sun's elevation, rad.
+    pub sun_elevation: f64,
+    /// Its sun's azimuth, rad.
+    pub sun_azimuth: f64,
+    /// Its generation, a number the daemon picks when the map is made (created,
+    /// uploaded, or loaded at start): a map deleted and made again under its id,
+    /// back at version 0, has another one.
+    pub generation: u32,
+}
+
+impl From<&MapInfo> for dyfos_map_info {
+    fn from(m: &MapInfo) -> Self {
+        dyfos_map_info {
+            map: m.id,
+            version: m.version,
+            bounds: m.bounds.to_array(),
+            sun_elevation: m.sun.elevation,
+            sun_azimuth: m.sun.azimuth,
+            generation: m.generation,
+        }
+    }
+}
+
 fn stop_code(s: StopReason) -> u32 {
     match s {
         StopReason::Finished => DYFOS_STOP_FINISHED,
@@ -658,5 +697,6 @@ mod tests {
         use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS};
         assert_eq!(DYFOS_MAX_BATCH_RECORDS as usize, MAX_DELTAS_PER_MESSAGE);
         assert_eq!(DYFOS_MAX_INLINE_RECORDS as usize, MAX_INLINE_DELTAS);
+        assert_eq!(DYFOS_MAX_MAPS as usize, dyfos_shared::limits::MAX_MAPS);
     }
 }

@@ -159,11 +159,20 @@ fn the_c_and_cpp_examples_print_what_dyfos_solve_prints() {
     }
 }
 
+/// What `dyfos` printed at a check program's `--- kill`, before the daemon was killed.
+#[derive(Default)]
+struct AtKill {
+    /// `dyfos map snapshot` of the map of the `snapshot MAP` section, if any.
+    snapshot: Option<String>,
+    /// `dyfos map list`, if the program printed a `maps` section.
+    list: Option<String>,
+}
+
 /// Runs `program SCENARIO PREFIX DOMAIN` against a fresh daemon as the checks in
 /// `tests/c/` expect: their `--- SECTION` output is returned; at `--- kill` the
-/// daemon's snapshot of the named map is taken with `dyfos map snapshot`, the
-/// daemon is killed, and the program told to go on.
-fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String, String)>, Option<String>) {
+/// daemon's snapshot of the named map and its list of maps are taken with `dyfos`,
+/// the daemon is killed, and the program told to go on.
+fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String, String)>, AtKill) {
     let mut daemon = sandbox.start_daemon(&[]);
     let mut child = Command::new(program)
         .env("DYFOS_TEST_OCTOMAP", data("octomap/geb079.bt"))
@@ -178,16 +187,21 @@ fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String
     let mut stdin = child.stdin.take().expect("stdin");
     let stdout = BufReader::new(child.stdout.take().expect("stdout"));
     let mut sections: Vec<(String, String)> = Vec::new();
-    let mut cli_snapshot = None;
+    let mut at_kill = AtKill::default();
     for line in stdout.lines() {
         let line = line.expect("a line of output");
         if let Some(name) = line.strip_prefix("--- ") {
             if name == "kill" {
+                let dyfos_map = |args: &[&str]| {
+                    let out = run(Command::new(bin("dyfos")).arg("map").args(args).args(sandbox.dyfos_flags()));
+                    String::from_utf8(out.stdout).expect("UTF-8")
+                };
                 let snapshot_map = sections.iter().find_map(|(n, _)| n.strip_prefix("snapshot ").map(str::to_string));
                 if let Some(map) = snapshot_map {
-                    let out =
-                        run(Command::new(bin("dyfos")).args(["map", "snapshot", &map]).args(sandbox.dyfos_flags()));
-                    cli_snapshot = Some(String::from_utf8(out.stdout).expect("UTF-8"));
+                    at_kill.snapshot = Some(dyfos_map(&["snapshot", &map]));
+                }
+                if sections.iter().any(|(n, _)| n == "maps") {
+                    at_kill.list = Some(dyfos_map(&["list"]));
                 }
                 daemon.kill9();
                 writeln!(stdin, "go on").expect("tell the program to go on");
@@ -207,7 +221,7 @@ fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String
         String::from_utf8_lossy(&output.stderr)
     );
     assert_eq!(sections.last().map(|s| s.0.as_str()), Some("done"), "{sections:?}");
-    (sections, cli_snapshot)
+    (sections, at_kill)
 }
 
 #[test]
@@ -219,7 +233,7 @@ fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
     compile(&prefix, &crate_dir().join("tests/c/ffi_check.c"), &program, Link::Shared);
     let sandbox = Sandbox::new("ffi-c");
     let scenario = data("example.json");
-    let (sections, cli_snapshot) = run_check(&program, &scenario, &sandbox);
+    let (sections, at_kill) = run_check(&program, &scenario, &sandbox);
     let mut compared = 0;
     for (name, text) in &sections {
         if let Some(rest) = name.strip_prefix("answer ") {
@@ -235,7 +249,8 @@ fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
     // The snapshot equals `dyfos map snapshot`'s, but for the CLI's `map` field.
     let snapshot = sections.iter().find(|(n, _)| n.starts_with("snapshot ")).expect("a snapshot").1.clone();
     let ours: serde_json::Value = serde_json::from_str(&snapshot).expect("snapshot JSON");
-    let mut cli: serde_json::Value = serde_json::from_str(&cli_snapshot.expect("the CLI's snapshot")).expect("JSON");
+    let mut cli: serde_json::Value =
+        serde_json::from_str(&at_kill.snapshot.expect("the CLI's snapshot")).expect("JSON");
     cli.as_object_mut().expect("an object").remove("map");
     assert_eq!(ours, cli);
     // The map after `[{"clear": {}}]` and the file of every delta kind: what the same
@@ -247,6 +262,24 @@ fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
     let expected = tiny.apply(&[MapDelta::Clear]).and_then(|w| w.apply(&deltas)).expect("the deltas apply");
     let (_, got) = dyfos_shared::map_json::map_from_json(&snapshot).expect("the snapshot reads back");
     assert_eq!(got, expected, "{snapshot}");
+    // The maps listed through C are those `dyfos map list` prints, number for number.
+    let listed = &sections.iter().find(|(n, _)| n == "maps").expect("a list of maps").1;
+    let cli_list = at_kill.list.expect("the CLI's list");
+    let cli_maps: Vec<serde_json::Value> =
+        cli_list.lines().map(|l| serde_json::from_str(l).expect("a JSON object a line")).collect();
+    assert!(cli_maps.len() >= 3, "the scenario's, the OctoMap and the small map: {cli_list}");
+    let as_cli = |line: &str| {
+        let f: Vec<&str> = line.split(' ').collect();
+        let number = |i: usize| f[i].parse::<f64>().expect("a number");
+        serde_json::json!({
+            "map": f[0].parse::<u64>().expect("an id"),
+            "version": f[1].parse::<u64>().expect("a version"),
+            "generation": f[2].parse::<u32>().expect("a generation"),
+            "bounds": [number(3), number(4), number(5), number(6)],
+            "sun": {"elevation": number(7), "azimuth": number(8)},
+        })
+    };
+    assert_eq!(listed.lines().map(as_cli).collect::<Vec<_>>(), cli_maps, "{listed}");
 }
 
 #[test]

@@ -25,7 +25,15 @@ fn header_is_up_to_date() {
         "include/dyfos.h differs from what cbindgen generates from src/; if the API change is intended, run \
          `DYFOS_BLESS_HEADER=1 cargo test -p dyfos-ffi --test header` and commit the header"
     );
-    for name in ["dyfos_client_connect", "dyfos_client_rendezvous", "DYFOS_STATUS_PANIC", "DYFOS_PARAM_LAMBDA"] {
+    for name in [
+        "dyfos_client_connect",
+        "dyfos_client_rendezvous",
+        "dyfos_client_list_maps",
+        "dyfos_map_info",
+        "DYFOS_MAX_MAPS",
+        "DYFOS_STATUS_PANIC",
+        "DYFOS_PARAM_LAMBDA",
+    ] {
         assert!(generated.contains(name), "{name} is missing from the header");
     }
 }

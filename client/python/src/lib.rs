@@ -531,6 +531,14 @@ impl PyClient {
         self.call(py, timeout, |c, t| c.delete_map(map_id, expected_version, t))
     }
 
+    /// Every map the daemon holds, in id order: a list of the dicts `dyfos map list`
+    /// prints, one a map.
+    #[pyo3(signature = (timeout=None))]
+    fn list_maps<'py>(&self, py: Python<'py>, timeout: Option<f64>) -> PyResult<Vec<Bound<'py, PyAny>>> {
+        let maps = self.call(py, timeout, |c, t| c.list_maps(t))?;
+        maps.iter().map(|m| json_to_py(py, &m.to_json())).collect()
+    }
+
     /// A rendezvous query; see `dyfos.Client.rendezvous`.
     #[pyo3(signature = (map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas, timeout))]
     #[allow(clippy::too_many_arguments)]

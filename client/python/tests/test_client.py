@@ -321,3 +321,31 @@ def test_an_octomap_uploads_updates_and_answers_as_its_scenario(client: dyfos.Cl
     with pytest.raises(dyfos.InvalidRequestError) as refused:
         client.upload_octomap(0x0C72, scenario, **kwargs)
     assert "not an OctoMap .bt file" in str(refused.value)
+
+
+def test_list_maps_walks_every_map_in_id_order(own_daemon: Any) -> None:
+    """``list_maps`` describes each map as ``snapshot`` and ``dyfos map list`` do, both
+    ends of the id range included; a deleted map is gone, one made again under its id
+    has another generation."""
+    d = own_daemon()
+    top = 2**64 - 1
+    with d.client() as client:
+        assert client.list_maps() == []
+        for n, map_id in enumerate([top, 0, 4242]):
+            client.create_map(map_id, [-10 - n, -10, 10, 10], (0.7, 2.1))
+        client.apply(4242, [{"clear": {}}, {"set_sun": {"elevation": 0.5, "azimuth": 1.0}}])
+        listed = client.list_maps(timeout=30)
+        assert [m["map"] for m in listed] == [0, 4242, top]
+        assert [m["version"] for m in listed] == [0, 2, 0]
+        for m in listed:
+            snap = client.snapshot(m["map"])
+            assert (m["version"], m["bounds"], m["sun"]) == (snap["version"], snap["bounds"], snap["sun"])
+            assert isinstance(m["generation"], int) and m["generation"] != 0
+        out = subprocess.run([DYFOS, "map", "list", *d.flags()], capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        assert [json.loads(line) for line in out.stdout.splitlines()] == listed
+        client.delete_map(4242)
+        assert [m["map"] for m in client.list_maps()] == [0, top]
+        client.create_map(4242, [-10, -10, 10, 10], (0.7, 2.1))
+        again = client.list_maps()[1]
+        assert (again["map"], again["version"]) == (4242, 0) and again["generation"] != listed[1]["generation"]

@@ -1,5 +1,5 @@
 //! The map service and the maps themselves: create, apply, chunked upload,
-//! paged snapshot, delete. Every accepted change is written to the store before
+//! paged snapshot, delete, list. Every accepted change is written to the store before
 //! it is visible; a failed write leaves the map as it was.
 
 use super::record::{ChangeCause, Record, Recorder, unix_ns, unix_ns_of};
@@ -604,6 +604,20 @@ fn handle(daemon: &mut Daemon, request: MapRequest) -> Result<Reply, Rejection> 
             info!(map, version = world.version(), "map deleted");
             Ok(ok(map, world.version()))
         }
+        MapRequest::List { from } => {
+            // No map at or after the cursor is the end of a listing, not an error.
+            let mut at_or_after = maps.maps.range(from..);
+            let mut reply = ok(from, 0);
+            reply.header.chunk_count = u32::try_from(at_or_after.clone().count()).unwrap_or(u32::MAX);
+            if let Some((id, world)) = at_or_after.next() {
+                reply.header.map_id = *id;
+                reply.header.version = world.version();
+                reply.header.generation = maps.generation(*id);
+                reply.header.bounds = world.bounds().to_array();
+                reply.header.sun = [world.sun().elevation, world.sun().azimuth];
+            }
+            Ok(reply)
+        }
     }
 }
 
@@ -623,6 +637,8 @@ fn request_json(request: &MapRequest) -> (&'static str, serde_json::Value) {
         ),
         MapRequest::Snapshot { page, .. } => ("snapshot", json!({"page": page})),
         MapRequest::Delete { expected_version, .. } => ("delete", json!({"expected_version": expected_version})),
+        // The cursor is the message's `map`; the map described is in its reply.
+        MapRequest::List { .. } => ("list", json!({})),
     }
 }
 
@@ -648,10 +664,17 @@ pub(super) fn on_request(daemon: &mut Daemon, active: MapActive) {
             if let (Some(recorder), Some((kind, request))) = (&daemon.shared.recorder, recorded.take()) {
                 let h = &reply.header;
                 let (received, replied) = (unix_ns_of(received), unix_ns(SystemTime::now()));
+                let mut recorded_reply = serde_json::json!({
+                    "status": "ok", "version": h.version, "chunk_index": h.chunk_index, "chunk_count": h.chunk_count,
+                });
+                if kind == "list" {
+                    // The map described, which is not the request's (the cursor).
+                    recorded_reply["map"] = h.map_id.into();
+                }
                 let message = serde_json::json!({
                     "kind": kind, "request_id": header.request_id, "map": header.map_id,
                     "received_ns": received, "replied_ns": replied, "request": request,
-                    "reply": {"status": "ok", "version": h.version, "chunk_index": h.chunk_index, "chunk_count": h.chunk_count},
+                    "reply": recorded_reply,
                 });
                 recorder.record(Record::Map { received, replied, message });
             }

@@ -170,9 +170,10 @@ pub fn json_schema(topic: &str) -> serde_json::Value {
                 "error_index": nint, "message": str_}},
         }),
         topics::MAP => json!({
-            "kind": {"enum": ["create", "apply", "upload", "snapshot", "delete"]}, "request_id": int, "map": int,
+            "kind": {"enum": ["create", "apply", "upload", "snapshot", "delete", "list"]}, "request_id": int, "map": int,
             "received_ns": int, "replied_ns": int, "request": obj,
-            "reply": {"type": "object", "properties": {"status": str_, "version": int, "chunk_index": int, "chunk_count": int}},
+            "reply": {"type": "object", "properties": {
+                "status": str_, "version": int, "chunk_index": int, "chunk_count": int, "map": int}},
         }),
         _ => json!({"dropped_total": int, "dropped_new": int, "reason": str_}),
     };

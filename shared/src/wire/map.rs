@@ -1,5 +1,5 @@
 //! The map service (`<prefix>map`): create a map, apply a batch of deltas, upload a
-//! whole map in chunks, snapshot it back in pages, delete it (SPEC §1).
+//! whole map in chunks, snapshot it back in pages, delete it, list the maps (SPEC §1).
 //!
 //! Map content travels as a slice of fixed-size [`WireDelta`] records. One
 //! [`MapDelta`] is one record, except `SetVoxels`, which is a run header followed
@@ -126,6 +126,9 @@ wire_codes! {
         SNAPSHOT = 4;
         /// Delete the map.
         DELETE = 5;
+        /// Describe the map with the smallest id at or after `map_id` (a cursor walk,
+        /// [`MapInfo`]); no records.
+        LIST = 6;
     }
 }
 
@@ -141,7 +144,7 @@ pub struct MapRequestHeader {
     pub op: u32,
     /// Upload: [`FLAG_REPLACE`]; otherwise 0.
     pub flags: u32,
-    /// The map.
+    /// The map; list: the cursor, the smallest id to describe.
     pub map_id: u64,
     /// Apply, upload-replace, delete: the version the map must have, or [`ANY_VERSION`].
     pub expected_version: u64,
@@ -171,23 +174,25 @@ pub struct MapReplyHeader {
     pub status: u32,
     /// Snapshot: this page's number; upload: the chunk acknowledged.
     pub chunk_index: u32,
-    /// Snapshot: the number of pages.
+    /// Snapshot: the number of pages; list: the number of maps at or after the
+    /// cursor (0: none, and no map is described).
     pub chunk_count: u32,
-    /// Snapshot: the map's generation, a number the daemon picks when the map is
-    /// made (created, uploaded or loaded at start). A map deleted and made again
-    /// under its id starts again at version 0 but has another generation, so a
-    /// client paging a snapshot starts again if a page's generation or version
+    /// Snapshot and list: the map's generation, a number the daemon picks when the
+    /// map is made (created, uploaded or loaded at start). A map deleted and made
+    /// again under its id starts again at version 0 but has another generation, so
+    /// a client paging a snapshot starts again if a page's generation or version
     /// differs from page 0's. 0 in every other reply.
     pub generation: u32,
     /// The request's id.
     pub request_id: u64,
-    /// The map.
+    /// The map (list: the map described, or the cursor if none).
     pub map_id: u64,
-    /// The map's version after the operation (snapshot: the version paged).
+    /// The map's version after the operation (snapshot: the version paged; list:
+    /// the described map's).
     pub version: u64,
-    /// Snapshot: the map's bounds.
+    /// Snapshot and list: the map's bounds.
     pub bounds: [f64; 4],
-    /// Snapshot: the map's sun.
+    /// Snapshot and list: the map's sun.
     pub sun: [f64; 2],
     /// For delta errors, the failing delta's index, else `u64::MAX`.
     pub error_index: u64,
@@ -250,6 +255,11 @@ pub enum MapRequest {
         map: MapId,
         /// The version it must have, or `None` for any.
         expected_version: Option<u64>,
+    },
+    /// Describe the map with the smallest id at or after `from`.
+    List {
+        /// The cursor: 0 first, then the id last described + 1.
+        from: MapId,
     },
 }
 
@@ -364,18 +374,24 @@ impl MapRequest {
                 no_records("delete")?;
                 Ok(MapRequest::Delete { map, expected_version: version_of(h.expected_version) })
             }
+            op::LIST => {
+                no_flags("list")?;
+                no_records("list")?;
+                Ok(MapRequest::List { from: map })
+            }
             other => Err(malformed(format!("op = {other} is not a map operation ({})", op::range()))),
         }
     }
 
-    /// The map this request is about.
+    /// The map this request is about (list: the cursor), its header's `map_id`.
     pub fn map(&self) -> MapId {
         match self {
             MapRequest::Create { map, .. }
             | MapRequest::Apply { map, .. }
             | MapRequest::Upload { map, .. }
             | MapRequest::Snapshot { map, .. }
-            | MapRequest::Delete { map, .. } => *map,
+            | MapRequest::Delete { map, .. }
+            | MapRequest::List { from: map } => *map,
         }
     }
 
@@ -418,6 +434,7 @@ impl MapRequest {
                 h.op = op::DELETE;
                 h.expected_version = expected_version.unwrap_or(ANY_VERSION);
             }
+            MapRequest::List { .. } => h.op = op::LIST,
         }
         h
     }
@@ -428,6 +445,64 @@ impl MapRequest {
             MapRequest::Apply { deltas, .. } | MapRequest::Upload { deltas, .. } => encode_deltas(deltas),
             _ => Vec::new(),
         }
+    }
+}
+
+/// One map as a list reply describes it ([`MapRequest::List`]).
+///
+/// To list every map, ask from 0, then from the id described + 1, until a reply
+/// describes none (at most [`crate::limits::MAX_MAPS`] maps exist at once). The list
+/// is not a snapshot of one moment: a map made or deleted while it is walked may or
+/// may not be in it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapInfo {
+    /// The map's id.
+    pub id: MapId,
+    /// Its version.
+    pub version: u64,
+    /// Its generation ([`MapReplyHeader::generation`]): another one if the map was
+    /// deleted and made again under its id.
+    pub generation: u32,
+    /// Its bounds.
+    pub bounds: Bounds,
+    /// Its sun.
+    pub sun: Sun,
+}
+
+impl MapInfo {
+    /// The map a successful reply to a list request from the cursor `from`
+    /// describes, or `None` if it says no map is at or after the cursor. The reply
+    /// is checked as the daemon checks requests: a map before the cursor, bounds or
+    /// a sun that are not valid are errors.
+    pub fn from_list_reply(from: MapId, h: &MapReplyHeader) -> Result<Option<MapInfo>, Rejection> {
+        if h.chunk_count == 0 {
+            return Ok(None);
+        }
+        if h.map_id < from {
+            return Err(malformed(format!(
+                "malformed reply: a list from map {from} described map {}, before it",
+                h.map_id
+            )));
+        }
+        Ok(Some(MapInfo {
+            id: h.map_id,
+            version: h.version,
+            generation: h.generation,
+            bounds: decode_bounds(h.bounds)?,
+            sun: decode_sun(h.sun)?,
+        }))
+    }
+
+    /// As JSON, for `dyfos map list`: `map`, `version`, `generation`, and `bounds`
+    /// and `sun` as a scenario writes them.
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "map": self.id,
+            "version": self.version,
+            "generation": self.generation,
+            "bounds": self.bounds.to_array(),
+            "sun": {"elevation": self.sun.elevation, "azimuth": self.sun.azimuth},
+        })
     }
 }
 
@@ -819,9 +894,9 @@ mod tests {
         let (last, _) = *tag::ALL.last().unwrap();
         let err = decode_deltas(&[WireDelta { tag: last + 1, ..Default::default() }]).unwrap_err();
         assert!(err.message.contains("1 (UPSERT_CYLINDER) ..= 10 (VOXEL_BLOCK)"), "{err}");
-        let h = MapRequestHeader { op: op::DELETE + 1, ..Default::default() };
+        let h = MapRequestHeader { op: op::LIST + 1, ..Default::default() };
         let err = MapRequest::decode(&h, &[]).unwrap_err();
-        assert!(err.message.contains("1 (CREATE) ..= 5 (DELETE)"), "{err}");
+        assert!(err.message.contains("1 (CREATE) ..= 6 (LIST)"), "{err}");
     }
 
     #[test]
@@ -928,5 +1003,38 @@ mod tests {
             MapRequest::decode(&MapRequestHeader { op: op::APPLY, ..h }, &too_many).unwrap_err().status,
             Status::OverCapacity
         );
+    }
+
+    #[test]
+    fn a_list_request_carries_only_its_cursor_and_its_reply_is_checked() {
+        let list = MapRequest::List { from: u64::MAX - 1 };
+        let h = list.header(3, [0, 0]);
+        assert_eq!((h.op, h.map_id, h.flags), (op::LIST, u64::MAX - 1, 0));
+        assert_eq!(MapRequest::decode(&h, &[]).unwrap(), list);
+        assert_eq!(list.map(), u64::MAX - 1);
+        let status = |h: MapRequestHeader, records: &[WireDelta]| MapRequest::decode(&h, records).unwrap_err().status;
+        assert_eq!(status(MapRequestHeader { flags: FLAG_REPLACE, ..h }, &[]), Status::MalformedRequest);
+        let clear = encode_deltas(&[MapDelta::Clear]);
+        assert_eq!(status(h, &clear), Status::MalformedRequest);
+
+        let described = MapReplyHeader {
+            chunk_count: 2,
+            generation: 9,
+            map_id: 40,
+            version: 3,
+            bounds: [-1.0, -2.0, 3.0, 4.0],
+            sun: [0.5, 1.0],
+            ..Default::default()
+        };
+        let info = MapInfo::from_list_reply(40, &described).unwrap().unwrap();
+        assert_eq!((info.id, info.version, info.generation), (40, 3, 9));
+        assert_eq!((info.bounds.to_array(), info.sun), (described.bounds, Sun::new(0.5, 1.0).unwrap()));
+        assert_eq!(info.to_json()["sun"]["azimuth"], 1.0);
+        // None at or after the cursor; a map before it, or bad numbers: refused.
+        assert_eq!(MapInfo::from_list_reply(41, &MapReplyHeader { chunk_count: 0, ..described }), Ok(None));
+        let refused = |from, h: MapReplyHeader| MapInfo::from_list_reply(from, &h).unwrap_err().status;
+        assert_eq!(refused(41, described), Status::MalformedRequest);
+        assert_eq!(refused(0, MapReplyHeader { bounds: [1.0, 0.0, 0.0, 1.0], ..described }), Status::InvalidDelta);
+        assert_eq!(refused(0, MapReplyHeader { sun: [f64::NAN, 0.0], ..described }), Status::InvalidDelta);
     }
 }

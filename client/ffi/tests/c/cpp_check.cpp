@@ -200,8 +200,27 @@ int main(int argc, char** argv) {
   EXPECT_THROW(client.create_map(tiny + 1, {1.0, 1.0, -1.0, -1.0}, 0.7, 2.1), dyfos::InvalidRequestError,
                DYFOS_STATUS_INVALID_DELTA);
   EXPECT_THROW(client.delete_map(tiny, 2), dyfos::VersionMismatchError, DYFOS_STATUS_MAP_VERSION_MISMATCH);
+  {
+    // Both maps, in id order, the small one as made and changed; then it is deleted.
+    std::vector<dyfos::MapInfo> maps = view.list_maps();
+    EXPECT_TRUE(maps.size() == 2);
+    if (maps.size() == 2) {
+      const dyfos::MapInfo& small = maps[0].map == tiny ? maps[0] : maps[1];
+      const dyfos::MapInfo& scenario_map = maps[0].map == tiny ? maps[1] : maps[0];
+      EXPECT_TRUE(maps[0].map < maps[1].map && small.map == tiny && scenario_map.map == map);
+      EXPECT_TRUE(small.version == 3 && scenario_map.version == version);
+      EXPECT_TRUE((small.bounds == std::array<double, 4>{-0.2, -0.2, 0.2, 0.2}));
+      EXPECT_TRUE(small.sun_elevation == 0.7 && small.sun_azimuth == 2.1);
+      EXPECT_TRUE(small.generation != 0 && scenario_map.generation != 0);
+    }
+  }
   client.delete_map(tiny, 3);
   EXPECT_THROW(client.snapshot(tiny), dyfos::UnknownMapError, DYFOS_STATUS_UNKNOWN_MAP);
+  {
+    std::vector<dyfos::MapInfo> maps = client.list_maps(std::chrono::seconds(30));
+    EXPECT_TRUE(maps.size() == 1 && maps[0].map == map);
+  }
+  EXPECT_THROW(first.list_maps(), dyfos::InvalidRequestError, DYFOS_STATUS_NULL_PARAMETER);
   // A timeout for one call; not positive is refused before anything is sent.
   bad = request;
   bad.algorithm = dyfos::Algorithm::Brute;

@@ -10,6 +10,8 @@
  *   --- snapshot MAP            the snapshot JSON of the small map, after the deltas of
  *                               $DYFOS_TEST_DELTAS (a file of every kind, docs/deltas.md)
  *   --- octomap                 the version of the OctoMap map (with $DYFOS_TEST_OCTOMAP set)
+ *   --- maps                    dyfos_client_list_maps' maps just before --- kill, one a line:
+ *                               map version generation x_min y_min x_max y_max elevation azimuth
  *   --- kill                    the driver kills the daemon, then writes a line to stdin
  *   --- done
  */
@@ -338,6 +340,55 @@ int main(int argc, char **argv) {
     EXPECT(dyfos_client_delete_map(client, 0, counted, DYFOS_ANY_VERSION), DYFOS_STATUS_OK);
   }
 
+  /* Listing: every map in id order, whole, cut to the array, or only counted. */
+  {
+    uint64_t made[3];
+    size_t n = 0;
+    made[n++] = map;
+    made[n++] = tiny_map;
+    if (bt_path) made[n++] = 0xB7;
+    for (size_t i = 1; i < n; i++) /* in id order */
+      for (size_t j = i; j > 0 && made[j - 1] > made[j]; j--) {
+        uint64_t t = made[j];
+        made[j] = made[j - 1];
+        made[j - 1] = t;
+      }
+    static dyfos_map_info maps[DYFOS_MAX_MAPS];
+    size_t count = 99;
+    EXPECT(dyfos_client_list_maps(client, 0, maps, DYFOS_MAX_MAPS, &count), DYFOS_STATUS_OK);
+    EXPECT_TRUE(count == n);
+    for (size_t i = 0; i < n && i < count; i++) EXPECT_TRUE(maps[i].map == made[i] && maps[i].generation != 0);
+    /* A map of known content: listed with its version, bounds and sun; gone once deleted. */
+    uint64_t listed = 0xFFFFFFFFFFFFFFFEull, at = 99; /* past every other id: listed last */
+    EXPECT(dyfos_client_create_map(client, 0, listed, tiny, 0.7, 2.1, NULL), DYFOS_STATUS_OK);
+    EXPECT(dyfos_client_apply(client, 0, listed, "[{\"clear\": {}}, {\"set_sun\": {\"elevation\": 0.5, \"azimuth\": 1.0}}]",
+                              0, &at),
+           DYFOS_STATUS_OK);
+    EXPECT(dyfos_client_list_maps(client, 0, maps, DYFOS_MAX_MAPS, &count), DYFOS_STATUS_OK);
+    EXPECT_TRUE(count == n + 1);
+    if (count == n + 1) {
+      dyfos_map_info last = maps[n];
+      EXPECT_TRUE(last.map == listed && last.version == 2 && at == 2 && last.generation != 0);
+      EXPECT_TRUE(memcmp(last.bounds, tiny, sizeof tiny) == 0 && last.sun_elevation == 0.5 && last.sun_azimuth == 1.0);
+    }
+    /* A smaller array: the first maps, and the whole count; the rest untouched. */
+    dyfos_map_info two[2];
+    memset(two, 0x5A, sizeof two);
+    dyfos_map_info untouched = two[1];
+    EXPECT(dyfos_client_list_maps(client, 0, two, 1, &count), DYFOS_STATUS_OK);
+    EXPECT_TRUE(count == n + 1 && two[0].map == made[0] && memcmp(&two[1], &untouched, sizeof untouched) == 0);
+    count = 99;
+    EXPECT(dyfos_client_list_maps(client, 0, NULL, 0, &count), DYFOS_STATUS_OK); /* the count only */
+    EXPECT_TRUE(count == n + 1);
+    EXPECT(dyfos_client_list_maps(client, 0, NULL, 2, &count), DYFOS_STATUS_NULL_PARAMETER);
+    EXPECT(dyfos_client_list_maps(client, 0, two, 2, NULL), DYFOS_STATUS_NULL_PARAMETER);
+    EXPECT(dyfos_client_list_maps(NULL, 0, two, 2, &count), DYFOS_STATUS_NULL_PARAMETER);
+    EXPECT_TRUE(count == n + 1); /* untouched on failure */
+    EXPECT(dyfos_client_delete_map(client, 0, listed, 2), DYFOS_STATUS_OK);
+    EXPECT(dyfos_client_list_maps(client, 0, maps, DYFOS_MAX_MAPS, &count), DYFOS_STATUS_OK);
+    EXPECT_TRUE(count == n && maps[n - 1].map == made[n - 1]);
+  }
+
   /* A timeout for one call, shorter than the handle's (60 s). */
   bad = request;
   bad.algorithm = DYFOS_ALGORITHM_BRUTE;
@@ -437,6 +488,20 @@ int main(int argc, char **argv) {
     EXPECT(dyfos_client_delete_map(client, 0, map, replaced), DYFOS_STATUS_OK);
     EXPECT(dyfos_client_upload_scenario(client, 0, scenario, 0, &id, &replaced), DYFOS_STATUS_OK);
     EXPECT_TRUE(id == map && replaced == 0);
+  }
+
+  /* The maps now, for the driver to compare with `dyfos map list`'s. */
+  {
+    static dyfos_map_info maps[DYFOS_MAX_MAPS];
+    size_t count = 0;
+    EXPECT(dyfos_client_list_maps(client, 0, maps, DYFOS_MAX_MAPS, &count), DYFOS_STATUS_OK);
+    printf("--- maps\n");
+    for (size_t i = 0; i < count && i < DYFOS_MAX_MAPS; i++) {
+      const dyfos_map_info *m = &maps[i];
+      printf("%llu %llu %u %.17g %.17g %.17g %.17g %.17g %.17g\n", (unsigned long long)m->map,
+             (unsigned long long)m->version, m->generation, m->bounds[0], m->bounds[1], m->bounds[2], m->bounds[3],
+             m->sun_elevation, m->sun_azimuth);
+    }
   }
 
   /* The daemon goes away: the handle says so, and nothing crashes. */

@@ -641,6 +641,14 @@ class Client:
         """Deletes the map (and its file in the daemon's state directory)."""
         self._raw.delete_map(map_id, expected_version, _seconds(timeout, "timeout"))
 
+    def list_maps(self, timeout: Optional[Seconds] = None) -> List[Dict[str, Any]]:
+        """Every map the daemon holds, in id order, as ``dyfos map list`` prints them: one
+        dict a map with ``map`` (its id), ``version``, ``generation`` (another one if the
+        map was deleted and made again under its id), ``bounds`` and ``sun`` as a scenario
+        writes them. One request per map, all within ``timeout``; maps made or deleted
+        while it lists may or may not be in the list."""
+        return self._raw.list_maps(_seconds(timeout, "timeout"))
+
     def _request(
         self,
         params: Optional[Mapping[str, Any]],
