@@ -38,7 +38,7 @@
 use crate::evaluation::query_seed;
 use crate::numerical::{NumericalConfig, numerical_maps};
 use crate::stats::quantile_sorted;
-use dyfos_client::idle::IdleCores;
+use dyfos_process::idle::IdleCores;
 use dyfos_service::search::SearchControl;
 use dyfos_service::solve;
 use dyfos_shared::scenario::Scenario;

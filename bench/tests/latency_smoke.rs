@@ -20,11 +20,11 @@ fn latency_command_smoke_run() {
     let output = Command::new(&exe)
         .args(["latency", "--seconds", "0.2", "--clients", "1,2", "--open-clients", "2", "--maps", "2"])
         .args(["--null-rates", "300", "--dyfos-rates", "30", "--mixed-null-rate", "300", "--mixed-dyfos-clients", "1"])
-        // A second daemon with another spin window, for the before/after table.
-        .arg("--compare-daemon-arg=--spin-us=50")
+        // A second daemon with another polling window, for the before/after table.
+        .arg("--compare-daemon-arg=--set=scheduling.poll_us=50")
         // Clients with a shorter poll window than the library default.
         .args(["--client-spin-us", "100"])
-        // The scheduling goals, short: one hog, 0.2 s idle.
+        // The contention runs, short: one hog, 0.2 s idle.
         .args(["--hogs", "1", "--idle-seconds", "0.2"])
         .arg("--out")
         .arg(&out)
@@ -44,19 +44,20 @@ fn latency_command_smoke_run() {
     }
     assert!(stdout.contains("in-process `dyfos` query"), "{stdout}");
     assert!(stdout.contains("### Mixed"), "{stdout}");
-    assert!(stdout.contains("(left) and with `--spin-us=50` (right)"), "{stdout}");
-    assert!(stdout.contains("### Targets: cheap requests while searches run"), "{stdout}");
-    for goal in [
-        "| stats requests (300/s",
-        "| map requests (300/s",
-        "| idle: dyfosd CPU",
-        "| CPU hog: 1 hog",
-        "| greedy client",
-        "| clients that come and go",
+    assert!(stdout.contains("(left) and dyfosd with `--set=scheduling.poll_us=50` (right)"), "{stdout}");
+    // The contention runs, against both daemons.
+    for run in [
+        "| stats open loop, 300/s over 1 client(s), beside dyfos closed loop",
+        "| map open loop, 300/s over 1 client(s), beside dyfos closed loop",
+        "| hog closed loop, 1 client(s), beside dyfos closed loop",
+        "| greedy closed loop, 1 client(s), beside dyfos closed loop",
+        "| null open loop, 300/s over 1 client(s), beside churn closed loop",
+        "| null open loop, 300/s over 1 client(s), beside dyfos closed loop",
     ] {
-        assert!(stdout.contains(goal), "missing `{goal}` in\n{stdout}");
+        assert!(stdout.contains(run), "missing `{run}` in\n{stdout}");
     }
-    assert!(stdout.contains("| null open loop, 300/s over 1 client(s), beside dyfos closed loop"), "{stdout}");
+    assert!(stdout.contains("Idle: dyfosd used ") && stdout.contains("; dyfosd with `--set"), "{stdout}");
+    assert!(!stdout.contains("Targets"), "no acceptance table: {stdout}");
     assert!(stdout.contains("Daemon shutdown: clean (SIGTERM, exit 0)"), "{stdout}");
     assert!(stdout.contains("shared-memory files left in /dev/shm: none"), "{stdout}");
 
@@ -64,7 +65,7 @@ fn latency_command_smoke_run() {
         serde_json::from_str(&std::fs::read_to_string(out.join("latency.json")).expect("latency.json")).unwrap();
     let rows = rows.as_array().unwrap();
     // floor: 1 closed + 1 open; null and dyfos: 2 closed + 1 open each; the mixed
-    // run's two groups; the goals: the hog alone, stats and map beside dyfos (2
+    // run's two groups; the contention runs: the hog alone, stats and map beside dyfos (2
     // each), dyfos alone, hog beside dyfos (2), greedy beside dyfos (2), null beside
     // a client that comes and goes (2); 2 in-process.
     assert_eq!(rows.len(), 24, "{rows:#?}");

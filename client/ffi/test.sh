@@ -21,7 +21,7 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 [ "${1:-}" = "--deps" ] && exit 0
 cd "$here/../.."
-cargo build -p dyfos-service --bins
+cargo build -p dyfos-service -p dyfos-cli --bins
 cargo test -p dyfos-ffi
 if [ "${1:-}" = "--cmake" ]; then
   cargo test -p dyfos-ffi --test c_and_cpp -- --ignored the_cmake_package_finds_the_library

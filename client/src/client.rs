@@ -2,7 +2,7 @@
 
 use crate::Ipc;
 use crate::error::{CallError, ClientOpenError, MapRequestError, RendezvousError, StatsRequestError};
-use crate::idle::IdleCores;
+use dyfos_process::idle::IdleCores;
 use dyfos_shared::answer::Answer;
 use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS, MAX_MAPS};
 use dyfos_shared::wire::map::{
@@ -42,7 +42,7 @@ pub struct ClientConfig {
     pub connect_timeout: Duration,
     /// How long to poll for a reply (yielding the core between polls) before
     /// sleeping on the reply event; the client sleeps at once, after a 50 µs poll,
-    /// while every core is taken (`dyfos_client::idle`). Replies within the window arrive without an event
+    /// while every core is taken (`dyfos_process::idle`). Replies within the window arrive without an event
     /// wake-up, which on a virtual machine goes through the host. The default, 1 ms,
     /// covers a typical `dyfos` query; longer windows cut a lone client's latency a
     /// little more but cost throughput when more clients than cores poll at once
@@ -65,8 +65,9 @@ impl Default for ClientConfig {
     }
 }
 
-/// The iceoryx2 configuration of a domain (`None`: iceoryx2's default).
-pub(crate) fn iceoryx_config(domain: Option<&str>) -> Result<iceoryx2::config::Config, ClientOpenError> {
+/// The iceoryx2 configuration of a domain (`None`: iceoryx2's default), as the
+/// client opens its ports; the mission processes open their topics with the same.
+pub fn iceoryx_config(domain: Option<&str>) -> Result<iceoryx2::config::Config, ClientOpenError> {
     let mut config = iceoryx2::config::Config::default();
     if let Some(d) = domain {
         let valid = !d.is_empty() && d.len() <= 32 && d.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_');

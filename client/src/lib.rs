@@ -28,17 +28,7 @@
 mod client;
 mod error;
 
-pub mod cli;
-pub mod eval;
-pub mod idle;
-pub mod logging;
-pub mod mission;
-pub mod rover;
-pub mod shutdown;
-pub mod sim;
-pub mod viewer;
-
-pub use client::{Client, ClientConfig};
+pub use client::{Client, ClientConfig, iceoryx_config};
 pub use dyfos_shared::wire::map::MapInfo;
 pub use dyfos_shared::wire::rendezvous::{RendezvousCheck, RendezvousRequest};
 pub use dyfos_shared::wire::stats::DaemonStats;

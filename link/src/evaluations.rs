@@ -1,7 +1,7 @@
 //! The viewer's link answers for the evaluations on its host.
 //!
 //! At the goal the rover waits for every reader of its estimates to acknowledge its
-//! last sample ([`dyfos_client::rover`]): a reader that has not taken the sample
+//! last sample ([`dyfos_mission::rover`]): a reader that has not taken the sample
 //! when the rover's ports close loses it. Across two hosts the rover's only reader
 //! is its own link, which forwards the samples, so the viewer's link acknowledges in
 //! the evaluations' name: once each reader of the estimates on the viewer's host has

@@ -3,9 +3,9 @@
 //! failed attempts to reach the other host.
 //!
 //! Zenoh exposes no counter for these, only `debug` and `trace` lines, one per
-//! event. [`TALLIES`] counts those lines ([`dyfos_client::logging::Tally`]: counted,
+//! event. [`TALLIES`] counts those lines ([`dyfos_process::logging::Tally`]: counted,
 //! not written) and [`Health`] turns the counts into a warning at most once per
-//! [`dyfos_client::logging::WINDOW`], the first as soon as there is something to say.
+//! [`dyfos_process::logging::WINDOW`], the first as soon as there is something to say.
 //!
 //! ```
 //! use dyfos_link::health::{Counts, Health};
@@ -21,7 +21,7 @@
 //! ```
 
 use crate::{HANDSHAKE_TIMEOUT, PENDING_HANDSHAKES};
-use dyfos_client::logging::Tally;
+use dyfos_process::logging::Tally;
 use std::time::{Duration, Instant};
 use tracing::Level;
 
@@ -38,7 +38,7 @@ pub static HANDSHAKES_TIMED_OUT: Tally = Tally::new(ACCEPTING, Level::DEBUG, "Fa
 pub static CONNECT_FAILED: Tally =
     Tally::new("zenoh::net::runtime::orchestrator", Level::DEBUG, "Unable to connect to configured peer");
 
-/// The tallies to give [`dyfos_client::logging::init_with`].
+/// The tallies to give [`dyfos_process::logging::init_with`].
 pub static TALLIES: [&Tally; 3] = [&HANDSHAKES_REFUSED, &HANDSHAKES_TIMED_OUT, &CONNECT_FAILED];
 
 /// The tallies' counts since the start.

@@ -4,11 +4,11 @@
 //! run one [`Link`], which carries the mission's topics between the host's own
 //! iceoryx2 shared memory and the other host over [Zenoh](https://zenoh.io) (TCP).
 //! The rover and the viewer do not change: their protocol
-//! ([`dyfos_client::mission::presence`]) already tolerates a link that drops, delays
+//! ([`dyfos_mission::mission::presence`]) already tolerates a link that drops, delays
 //! or restarts, and the viewer's queries to `dyfosd` stay on its own host.
 //!
 //! ```no_run
-//! use dyfos_client::mission::topics::TopicsConfig;
+//! use dyfos_mission::mission::topics::TopicsConfig;
 //! use dyfos_link::{Link, LinkConfig, Side};
 //!
 //! let topics = TopicsConfig { prefix: "dyfos/".into(), domain: None, mission: "field-1".into() };
@@ -60,7 +60,7 @@
 pub mod evaluations;
 pub mod health;
 
-use dyfos_client::mission::topics::{MAX_BUFFER, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
+use dyfos_mission::mission::topics::{MAX_BUFFER, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
 use dyfos_shared::wire::mission::{
     Ack, AckMsg, ESTIMATE_TOPIC, EVALUATION_TOPIC, Estimate, EstimateMsg, EvaluationAckMsg, MEASUREMENT_TOPIC,
     Measurement, MeasurementMsg, Phase, PresenceMsg, RENDEZVOUS_TOPIC, ROVER_ACK_TOPIC, ROVER_PRESENCE_TOPIC,

@@ -234,7 +234,7 @@ fn levenshtein(a: &str, b: &str) -> usize {
 /// Appends "did you mean `x`?" to serde's unknown-field and unknown-variant
 /// messages. Names are compared without case and underscores, so that
 /// `SetSun` finds `set_sun`.
-fn suggest(message: String) -> String {
+pub fn suggest(message: String) -> String {
     let Some(rest) = message.strip_prefix("unknown field `").or_else(|| message.strip_prefix("unknown variant `"))
     else {
         return message;

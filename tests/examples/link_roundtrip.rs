@@ -12,7 +12,7 @@
 //! A responder thread on the "viewer's host" answers each rendezvous state at once
 //! with a measurement of the same step; the "rover" thread times send → receipt.
 
-use dyfos_client::mission::topics::{Inbox, Outbox, Topics, TopicsConfig};
+use dyfos_mission::mission::topics::{Inbox, Outbox, Topics, TopicsConfig};
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::wire::mission::{
     MEASUREMENT_TOPIC, Measurement, MeasurementMsg, NoMeasurement, Observation, RENDEZVOUS_TOPIC, RendezvousState,
@@ -189,7 +189,7 @@ fn main() {
         let _ = r.join();
     }
     for mut l in links {
-        dyfos_client::shutdown::terminate(l.id());
+        dyfos_process::shutdown::terminate(l.id());
         let _ = l.wait();
     }
     let _ = std::fs::remove_file(&credentials);

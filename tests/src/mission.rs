@@ -16,11 +16,11 @@
 
 use crate::hosts::{Hosts, ROVER, VIEWER};
 use crate::{Sandbox, bin, wait_for};
-use dyfos_client::eval::{MissionTrace, Recorder};
-use dyfos_client::mission::Mission;
-use dyfos_client::mission::log::read_events;
-use dyfos_client::mission::topics::TopicsConfig;
-use dyfos_client::sim::OdometryNoise;
+use dyfos_mission::eval::{MissionTrace, Recorder};
+use dyfos_mission::mission::Mission;
+use dyfos_mission::mission::log::read_events;
+use dyfos_mission::mission::topics::TopicsConfig;
+use dyfos_mission::sim::OdometryNoise;
 use dyfos_shared::math::Point2;
 use dyfos_shared::params::Params;
 use dyfos_shared::posterior::Belief;
@@ -225,7 +225,7 @@ impl Robot {
     /// SIGTERM, and wait (at most [`crate::PATIENCE`]) for the exit.
     pub fn terminate(&mut self) -> ExitStatus {
         if let Some(c) = &self.child {
-            dyfos_client::shutdown::terminate(c.id());
+            dyfos_process::shutdown::terminate(c.id());
         }
         self.wait_exit()
     }

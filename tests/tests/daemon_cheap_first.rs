@@ -118,8 +118,7 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
 /// a second client's short query (the example map) is answered while every one of
 /// the first client's searches is still unanswered, because the daemon holds one
 /// of them at its next checkpoint and runs the short query on its core. Without
-/// holding (`--queue fifo`), the short query waits for a greedy search to end and
-/// this test fails.
+/// holding, the short query waits for a greedy search to end and this test fails.
 #[test]
 fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
     let sandbox = Sandbox::new("hold");

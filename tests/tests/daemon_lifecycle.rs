@@ -348,14 +348,14 @@ fn a_client_stopped_and_continued_mid_query_still_gets_its_answer() {
 /// wait set moved into the daemon after attaching, so every wake-up read `Idle`.
 #[test]
 fn a_request_that_wakes_the_daemon_is_reported_as_work() {
-    use dyfos_service::daemon::{Daemon, DaemonConfig, WaitOutcome};
+    use dyfos_service::daemon::{Daemon, DaemonConfig, Scheduling, WaitOutcome};
     let sandbox = Sandbox::new("wait-work");
     let config = DaemonConfig {
         prefix: sandbox.prefix.clone(),
         domain: Some(sandbox.domain.clone()),
         state_dir: sandbox.state_dir.clone(),
         // This test's thread is the IPC thread: keep it out of real-time scheduling.
-        ipc_priority: 0,
+        scheduling: Scheduling { ipc_priority: 0, ..Scheduling::default() },
         ..DaemonConfig::default()
     };
     let mut daemon = Daemon::create(&config).unwrap();

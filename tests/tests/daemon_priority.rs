@@ -1,8 +1,9 @@
-//! `dyfosd --worker-nice N`: the search workers run N nice levels below the thread
-//! that answers requests, so cheap queries preempt running searches
-//! (`bench/RESULTS.md`, "Why the scheduling defaults"). By default the IPC thread
-//! sleeps at `SCHED_FIFO` 10 where the system allows it, else the workers are niced
-//! by 5. Linux only: read from `/proc`.
+//! The priorities of `dyfosd`'s threads: the IPC thread sleeps at `SCHED_FIFO`
+//! (`scheduling.ipc_priority`, default 10) where the system allows it, so cheap
+//! queries preempt running searches (`bench/RESULTS.md`, "Why the scheduling
+//! defaults"); the search workers stay at its nice level unless neither real-time
+//! nor a short time slice is allowed, when they run 5 nice levels lower. Linux
+//! only: read from `/proc`.
 
 #![cfg(target_os = "linux")]
 
@@ -46,25 +47,22 @@ fn workers_and_main(pid: u32) -> (Vec<i32>, i32) {
 }
 
 #[test]
-fn worker_nice_lowers_only_the_search_workers() {
-    let sandbox = Sandbox::new("worker-nice");
-    let daemon = sandbox.start_daemon(&["--worker-nice", "7", "--workers", "3"]);
-    let (workers, main) = workers_and_main(daemon.pid());
-    // Three workers and, with the (default) fair queue, a spare for each: they run
-    // queries on the cores of held searches.
-    assert_eq!(workers.len(), 6, "{:?}", thread_nices(daemon.pid()));
-    assert!(workers.iter().all(|n| *n == (main + 7).min(19)), "workers {workers:?}, IPC thread {main}");
-    // It still answers (a query runs on a lowered worker).
+fn the_ipc_thread_sleeps_real_time_and_the_workers_are_niced_only_as_a_fallback() {
+    let sandbox = Sandbox::new("priority-default");
+    let daemon = sandbox.start_daemon(&["--workers", "3"]);
+    // Three workers and a spare for each: they run queries on the cores of held
+    // searches.
+    assert_eq!(workers_and_main(daemon.pid()).0.len(), 6, "{:?}", thread_nices(daemon.pid()));
     let mut client = sandbox.client();
     assert_eq!(client.stats(dyfos_tests::PATIENCE).unwrap().workers, 3);
-    drop(daemon);
-
-    let sandbox = Sandbox::new("worker-nice-default");
-    let daemon = sandbox.start_daemon(&[]);
+    drop(client);
     let (workers, main) = workers_and_main(daemon.pid());
-    if daemon.log().contains("real-time priority 10 refused") {
-        // No CAP_SYS_NICE / RLIMIT_RTPRIO here: the fallback.
+    if daemon.log().contains("the search workers are niced instead") {
+        // Neither real-time (no CAP_SYS_NICE / RLIMIT_RTPRIO) nor a short slice.
         assert!(workers.iter().all(|n| *n == (main + 5).min(19)), "fallback: {workers:?} vs {main}");
+    } else if daemon.log().contains("real-time priority 10 refused") {
+        // A short time slice instead: the workers need no lowering.
+        assert!(workers.iter().all(|n| *n == main), "short slice: {workers:?} vs {main}");
     } else {
         assert!(
             !workers.is_empty() && workers.iter().all(|n| *n == main),
@@ -80,7 +78,7 @@ fn worker_nice_lowers_only_the_search_workers() {
 
     // Off: the IPC thread stays normal.
     let sandbox = Sandbox::new("ipc-priority-off");
-    let daemon = sandbox.start_daemon(&["--ipc-priority", "0"]);
+    let daemon = sandbox.start_daemon(&["--set", "scheduling.ipc_priority=0"]);
     let mut client = sandbox.client();
     client.stats(dyfos_tests::PATIENCE).unwrap();
     std::thread::sleep(std::time::Duration::from_millis(50));

@@ -564,7 +564,7 @@ fn an_upload_past_a_maps_limits_is_refused_before_it_completes() {
 #[test]
 fn a_brute_flood_never_makes_a_cheap_query_busy() {
     let sandbox = Sandbox::new("flood");
-    let _daemon = sandbox.start_daemon(&["--max-queued", "3", "--workers", "2"]);
+    let _daemon = sandbox.start_daemon(&["--set", "limits.max_queued=3", "--workers", "2"]);
     let mut client = sandbox.client();
     let s = scenario("golden/scenarios/numerical/map_00.json");
     client.upload_map(1, &s.world, false, PATIENCE).unwrap();
@@ -640,7 +640,7 @@ fn a_misbehaving_client_cannot_flood_the_daemons_log() {
     // Both patterns go on for at least 3 s and until the daemon has seen the first
     // (at most 30 s). The second makes iceoryx2 warn only when the dead listener's
     // slot comes before the live one's, which this test cannot choose; the limit on
-    // iceoryx2's lines is shown by `dyfos_client::logging`'s unit test.
+    // iceoryx2's lines is shown by `dyfos_process::logging`'s unit test.
     let done = AtomicBool::new(false);
     let brute =
         RendezvousRequest { algorithm: Algorithm::Brute, params: s.params, ..RendezvousRequest::new(1, s.belief) };

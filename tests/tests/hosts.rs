@@ -18,9 +18,9 @@
 //! - a link says when it cannot reach its peer, and when the peer serves another
 //!   mission; no link warns about Zenoh's gossip.
 
-use dyfos_client::eval::{MissionTrace, Recorder};
-use dyfos_client::mission::Mission;
-use dyfos_client::mission::topics::{Topics, TopicsConfig};
+use dyfos_mission::eval::{MissionTrace, Recorder};
+use dyfos_mission::mission::Mission;
+use dyfos_mission::mission::topics::{Topics, TopicsConfig};
 use dyfos_shared::wire::mission::{MEASUREMENT_TOPIC, Measurement, MeasurementMsg, Observation};
 use dyfos_tests::hosts::{Hosts, INTRUDER, ROVER, Stranger, VIEWER};
 use dyfos_tests::mission::{MissionFiles, Robot, small_mission, steps_of};

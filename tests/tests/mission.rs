@@ -3,7 +3,7 @@
 //! what the other side sent, measurements beat dead reckoning, and a viewer killed
 //! mid-run leaves the rover finishing on dead reckoning.
 
-use dyfos_client::mission::Mission;
+use dyfos_mission::mission::Mission;
 use dyfos_shared::wire::mission::Observation;
 use dyfos_tests::mission::{MissionFiles, record_until_exit, small_mission, steps_of};
 use dyfos_tests::{PATIENCE, Sandbox, bin};
@@ -272,7 +272,7 @@ fn the_example_mission_file_runs_in_the_demo_format() {
     assert_eq!(mission.waypoints.len(), 4);
     assert_eq!(mission.world.obstacles().len(), 4);
     assert_eq!(mission.odometry.rot_per_m, 0.001);
-    assert_eq!(mission.odometry.trans_per_m, dyfos_client::sim::OdometryNoise::default().trans_per_m);
+    assert_eq!(mission.odometry.trans_per_m, dyfos_mission::sim::OdometryNoise::default().trans_per_m);
     assert_eq!(mission.sun_azimuth_rate, 0.01);
 }
 
@@ -363,7 +363,7 @@ fn dyfos_ape_prints_the_table_of_a_missions_mcap_file() {
 /// summarised before the rover and the viewer exit.
 #[test]
 fn the_rover_and_viewer_say_at_exit_what_their_log_left_out() {
-    use dyfos_client::mission::topics::{Topics, TopicsConfig};
+    use dyfos_mission::mission::topics::{Topics, TopicsConfig};
     use dyfos_shared::wire::mission::{AckMsg, ROVER_ACK_TOPIC, VIEWER_ACK_TOPIC};
     let sandbox = Sandbox::new("mission-log-exit");
     let _daemon = sandbox.start_daemon(&[]);

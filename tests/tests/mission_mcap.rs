@@ -7,8 +7,8 @@
 //! logs and the evaluation's trace say. In the ROS 2 profile, every schema is the
 //! full rosbag2 definition of its type and the messages are where they belong.
 
-use dyfos_client::eval::foxglove::CHANNELS;
-use dyfos_client::eval::{MissionTrace, ros2};
+use dyfos_mission::eval::foxglove::CHANNELS;
+use dyfos_mission::eval::{MissionTrace, ros2};
 use dyfos_shared::wire::mission::Observation;
 use dyfos_tests::Sandbox;
 use dyfos_tests::mission::{MissionFiles, record_until_exit, small_mission, steps_of};
@@ -364,7 +364,7 @@ fn a_message_with_a_misspelt_field_does_not_pass_the_check() {
     // The check above must be able to fail: a typo, a missing required field and a
     // wrong type are caught against Foxglove's own schema.
     let schema: Value =
-        serde_json::from_str(dyfos_client::eval::foxglove::schema("foxglove.PoseInFrame").unwrap()).unwrap();
+        serde_json::from_str(dyfos_mission::eval::foxglove::schema("foxglove.PoseInFrame").unwrap()).unwrap();
     let good = json!({"timestamp": {"sec": 1, "nsec": 2}, "frame_id": "map",
                       "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}});
     conforms(&good, &schema, "m").unwrap();

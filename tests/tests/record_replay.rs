@@ -215,6 +215,12 @@ fn a_recorded_run_replays_identically_and_a_changed_parameter_shows() {
     assert_eq!(count(topics::RECORDER), 0, "nothing was dropped");
     let config = &messages[topics::CONFIG][0];
     assert_eq!(config["config"]["prefix"], sandbox.prefix.as_str());
+    // Every key of the daemon's configuration, and no other: it reads back as one and
+    // writes out the same; `workers` as started.
+    let head: dyfos_service::daemon::DaemonConfig =
+        serde_json::from_value(config["config"].clone()).expect("the head is a configuration");
+    assert_eq!(head.to_json(head.workers), config["config"]);
+    assert_eq!((head.workers, head.recording.path.as_deref()), (2, Some(file.as_path())));
     assert_eq!(config["build"]["version"], env!("CARGO_PKG_VERSION"));
     let causes: Vec<&str> = messages[topics::MAP_CHANGE].iter().map(|m| m["cause"].as_str().unwrap_or("?")).collect();
     for cause in ["create", "upload", "apply", "inline", "delete"] {
@@ -279,8 +285,16 @@ fn a_killed_recording_daemon_leaves_readable_rotated_files() {
     // Two workers: the recording's order is still the order the client saw its
     // answers in (a query is recorded before its reply is sent), so the last one on
     // disk means every earlier one is too.
-    let args =
-        ["--workers", "2", "--record", file.to_str().unwrap(), "--record-max-bytes", "6000", "--record-keep", "2"];
+    let args = [
+        "--workers",
+        "2",
+        "--record",
+        file.to_str().unwrap(),
+        "--set",
+        "recording.max_bytes=6000",
+        "--set",
+        "recording.keep=2",
+    ];
     let mut daemon = sandbox.start_daemon_logging("info", &args);
     let maps = maps();
     let mut c = sandbox.client();
@@ -303,7 +317,7 @@ fn a_killed_recording_daemon_leaves_readable_rotated_files() {
         (last_written && rotated(2).exists()).then_some(())
     });
     daemon.kill9();
-    assert!(!rotated(3).exists(), "--record-keep 2 keeps two rotated files");
+    assert!(!rotated(3).exists(), "recording.keep = 2 keeps two rotated files");
     // Killed between the two renames of a rotation, the next file has not taken its
     // name yet; a current file always has its head (it takes its name with it).
     let current_bytes = std::fs::read(&file).ok();

@@ -212,7 +212,7 @@ def test_busy_shutting_down_and_daemon_gone(own_daemon: Any, tmp_path: Path) -> 
     """One worker, one queue slot: a third slow query is refused `busy`. A daemon
     told to stop refuses new work `shutting_down`; one killed mid-query leaves its
     client `daemon_gone`."""
-    d = own_daemon("--workers", "1", "--max-queued", "1")
+    d = own_daemon("--workers", "1", "--set", "limits.max_queued=1")
     s = slow_scenario()
     mean, cov, params = s["rover"]["mean"], s["rover"]["cov"], s["params"]
     with d.client() as c:

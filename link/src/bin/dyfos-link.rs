@@ -5,9 +5,9 @@
 //! bad flags or credentials; 1 otherwise (Zenoh or iceoryx2 failure).
 
 use clap::Parser;
-use dyfos_client::shutdown;
 use dyfos_link::health::{Counts, Health, TALLIES};
 use dyfos_link::{Link, LinkConfig, LinkStartError, Side};
+use dyfos_process::shutdown;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -21,7 +21,7 @@ struct Cli {
     #[arg(long, value_parser = parse_side)]
     side: Side,
     #[command(flatten)]
-    topics: dyfos_client::cli::TopicArgs,
+    topics: dyfos_mission::cli::TopicArgs,
     /// Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).
     #[arg(long)]
     listen: Vec<String>,
@@ -80,7 +80,7 @@ fn main() -> ExitCode {
     // Zenoh says why it refused a peer (no or wrong credentials) only at debug
     // level: those lines are shown, rate-limited like warnings. Handshakes it gave
     // up on and failed attempts to reach the other host are counted and reported.
-    dyfos_client::logging::init_with("info", &[REFUSALS], &TALLIES);
+    dyfos_process::logging::init_with("info", &[REFUSALS], &TALLIES);
     let (config, exit_after) = match config(&cli) {
         Ok(c) => c,
         Err(e) => {
@@ -102,7 +102,7 @@ fn main() -> ExitCode {
     };
     let start = std::time::Instant::now();
     let mut connected = false;
-    let mut health = Health::new(dyfos_client::logging::WINDOW);
+    let mut health = Health::new(dyfos_process::logging::WINDOW);
     while !shutdown::requested() && exit_after.is_none_or(|d| start.elapsed() < d) {
         for line in health.report(std::time::Instant::now(), &Counts::now()) {
             tracing::warn!("{line}");
@@ -120,7 +120,7 @@ fn main() -> ExitCode {
     }
     let stats = link.stop();
     tracing::info!(sent = stats.sent, received = stats.received, dropped = stats.dropped, "link stopped");
-    dyfos_client::logging::flush();
+    dyfos_process::logging::flush();
     ExitCode::SUCCESS
 }
 
@@ -129,6 +129,6 @@ mod cli_tests {
     /// Every number a dyfos command prints can be pasted back, `-7.08e-06` included.
     #[test]
     fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
-        dyfos_client::cli::assert_numeric_flags_take_signs(&<super::Cli as clap::CommandFactory>::command());
+        dyfos_process::cli::assert_numeric_flags_take_signs(&<super::Cli as clap::CommandFactory>::command());
     }
 }

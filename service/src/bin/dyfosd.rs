@@ -1,23 +1,23 @@
 //! `dyfosd`: the DyFOS optimizer daemon. Robot processes on this computer query it
 //! over iceoryx2 shared memory (see `dyfos_client`).
 //!
-//! Configuration: flags, over an optional TOML file (`--config`), over defaults.
-//! Logs go to stderr through `tracing`; `RUST_LOG` filters them (default `info`),
-//! iceoryx2's own log included (`IOX2_LOG_LEVEL`, default warn).
+//! Configuration ([`DaemonConfig`], every key in docs/daemon.md): the defaults,
+//! over them a TOML file (`--config`), over that each `--set KEY=VALUE`, over that
+//! the flags below. Logs go to stderr through `tracing`; `RUST_LOG` filters them
+//! (default `info`), iceoryx2's own log included (`IOX2_LOG_LEVEL`, default warn).
 //!
 //! Exit codes: 0 after SIGINT/SIGTERM once the queries in flight are answered;
 //! 2 for a bad flag, configuration or model file; 1 if the daemon cannot start.
 
-use anyhow::Context;
-use clap::Parser;
-use dyfos_service::daemon::{Daemon, DaemonConfig, DaemonCreateError, HOUSEKEEPING, RecordConfig, WaitOutcome};
+use clap::{CommandFactory, Parser};
+use dyfos_service::daemon::{Daemon, DaemonConfig, DaemonCreateError, HOUSEKEEPING, WaitOutcome, former_flag};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// The DyFOS optimizer daemon: answers rendezvous queries from robot processes.
 #[derive(Debug, Parser)]
-#[command(name = "dyfosd", version, about, long_about = None)]
+#[command(name = "dyfosd", version, long_about = None)]
 struct Cli {
     /// Service-name prefix; clients must use the same (default `dyfos/`).
     #[arg(long)]
@@ -25,218 +25,66 @@ struct Cli {
     /// Directory where maps are persisted (default `$XDG_STATE_HOME/dyfos` or `~/.local/state/dyfos`).
     #[arg(long)]
     state_dir: Option<PathBuf>,
-    /// TOML file with any of: prefix, state_dir, domain, workers, spin_us,
-    /// max_clients, max_requests_per_client, max_queued, upload_idle_timeout_s, model,
-    /// worker_nice, ipc_priority, spin_max_us, queue, worker_batch, worker_yield_us,
-    /// worker_slice_us, cpu_latency_us, record,
-    /// record_max_bytes, record_keep.
-    #[arg(long)]
-    config: Option<PathBuf>,
     /// iceoryx2 file prefix: only processes of the same domain see each other (default iceoryx2's `iox2_`).
     #[arg(long)]
     domain: Option<String>,
     /// Search worker threads (default: one per core, at least 2).
     #[arg(long)]
     workers: Option<usize>,
-    /// Microseconds to keep polling after a request before sleeping (default 200).
-    #[arg(long)]
-    spin_us: Option<u64>,
-    /// Most client connections per service (default 64).
-    #[arg(long)]
-    max_clients: Option<usize>,
-    /// Most queries waiting for a worker before `busy`, brute and the others each (default 256).
-    #[arg(long)]
-    max_queued: Option<usize>,
     /// Model file of the learned SDSMM (from `dyfos train`), for queries with model `learned`.
     #[arg(long, value_name = "FILE")]
     model: Option<PathBuf>,
-    /// Nice levels the search workers run below the daemon's IPC thread, 0–19
-    /// (default 0): cheap queries then preempt running searches, which also yield to
-    /// other processes. 10 suits a mix of cheap and long queries on few cores.
-    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=19))]
-    worker_nice: Option<u8>,
-    /// SCHED_FIFO priority of the thread that answers requests while it sleeps,
-    /// 1–99 (default 10), so a request preempts running searches; 0 turns it off.
-    /// Needs CAP_SYS_NICE or `ulimit -r`; refused, it asks for a 0.1 ms time slice
-    /// instead (Linux 6.12 and later), else the workers are niced by 5.
-    #[arg(long, value_parser = clap::value_parser!(u8).range(0..=99))]
-    ipc_priority: Option<u8>,
-    /// Longest time to keep polling after a request while traffic is steady, µs
-    /// (default 2000); 0 keeps to --spin-us always.
-    #[arg(long)]
-    spin_max_us: Option<u64>,
-    /// How free workers pick queued searches: `fair` (default: the client with the
-    /// fewest running first, and a search of the busiest client held while a client
-    /// with none running gets a core) or `fifo` (oldest first, nothing held).
-    #[arg(long, value_parser = ["fair", "fifo"])]
-    queue: Option<String>,
-    /// Run the search workers as SCHED_BATCH.
-    #[arg(long)]
-    worker_batch: bool,
-    /// How often, at most, a running search yields its core to a thread waiting for
-    /// one, µs (default 50; 0: never). Only while more threads are runnable than
-    /// there are cores: a request sent meanwhile then waits at most about this long
-    /// for its process to run, not a scheduler tick.
-    #[arg(long, value_name = "MICROS")]
-    worker_yield_us: Option<u64>,
-    /// Time slice the search workers ask for, µs (default 3000; 0: the kernel's;
-    /// else 100–100000). Longer than other threads' slices, so on Linux 6.12 and
-    /// later a thread that wakes where a search runs preempts it at once.
-    #[arg(long, value_name = "MICROS")]
-    worker_slice_us: Option<u64>,
-    /// While requests arrive steadily, ask that idle cores wake within this many µs
-    /// (default 0: idle cores poll, a wake-up takes µs), until 50 ms after the last
-    /// request; `off` leaves the kernel's choice. Needs root (/dev/cpu_dma_latency).
-    #[arg(long, value_name = "MICROS|off", value_parser = parse_cpu_latency)]
-    cpu_latency_us: Option<CpuLatency>,
-    /// dyfosd's earlier scheduling, for comparisons: no real-time IPC
-    /// thread, a fixed --spin-us window, a FIFO queue, searches that never yield
-    /// and keep the kernel's slice, idle cores as the kernel likes (same as
-    /// `--ipc-priority 0 --spin-max-us 0 --queue fifo --worker-yield-us 0
-    /// --worker-slice-us 0 --cpu-latency-us off`;
-    /// those flags win if given too).
-    #[arg(long)]
-    legacy_scheduling: bool,
     /// Record every accepted request with its reply, every map change and the
-    /// configuration to this MCAP file (off by default; see `dyfos replay` and
-    /// docs/record.md). An existing file is rotated away first.
+    /// configuration to this MCAP file (off by default; see docs/record.md).
     #[arg(long, value_name = "FILE.mcap")]
     record: Option<PathBuf>,
-    /// Rotate the recording once it is this many bytes (default 268435456, 256 MiB):
-    /// FILE.mcap becomes FILE.1.mcap, and so on.
-    #[arg(long, value_name = "BYTES")]
-    record_max_bytes: Option<u64>,
-    /// Rotated recordings kept besides the current one (default 4).
-    #[arg(long, value_name = "K")]
-    record_keep: Option<usize>,
+    /// TOML file with any of the keys of docs/daemon.md, in tables `[limits]`,
+    /// `[scheduling]`, `[recording]`; `--set` and the flags above win over it.
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Set one key of the configuration, e.g. `--set scheduling.cpu_latency_us=200`
+    /// or `--set limits.max_queued=64` (value in TOML; repeatable; wins over --config).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+    /// Print the configuration these flags make, as TOML, and exit.
+    #[arg(long)]
+    print_config: bool,
 }
 
-/// The TOML file's keys; each is optional and a flag overrides it.
-#[derive(Debug, Default, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct FileConfig {
-    prefix: Option<String>,
-    state_dir: Option<PathBuf>,
-    domain: Option<String>,
-    workers: Option<usize>,
-    spin_us: Option<u64>,
-    max_clients: Option<usize>,
-    max_requests_per_client: Option<usize>,
-    max_queued: Option<usize>,
-    upload_idle_timeout_s: Option<u64>,
-    model: Option<PathBuf>,
-    worker_nice: Option<u8>,
-    ipc_priority: Option<u8>,
-    spin_max_us: Option<u64>,
-    queue: Option<String>,
-    worker_batch: Option<bool>,
-    worker_yield_us: Option<u64>,
-    worker_slice_us: Option<u64>,
-    cpu_latency_us: Option<CpuLatency>,
-    record: Option<PathBuf>,
-    record_max_bytes: Option<u64>,
-    record_keep: Option<usize>,
-}
-
-/// `cpu_latency_us`: µs, or `"off"`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
-#[serde(untagged)]
-enum CpuLatency {
-    Micros(u32),
-    #[serde(deserialize_with = "off")]
-    Off,
-}
-
-fn off<'de, D: serde::Deserializer<'de>>(d: D) -> Result<(), D::Error> {
-    match <String as serde::Deserialize>::deserialize(d)?.as_str() {
-        "off" => Ok(()),
-        other => Err(serde::de::Error::custom(format!("\"{other}\" is neither a number of µs nor \"off\""))),
+/// The configuration: defaults, file, `--set`s, then the flags; validated.
+fn config(cli: &Cli) -> Result<DaemonConfig, dyfos_service::daemon::ConfigError> {
+    let mut c = DaemonConfig::load(cli.config.as_deref(), &cli.set)?;
+    if let Some(p) = &cli.prefix {
+        c.prefix = p.clone();
     }
-}
-
-fn parse_cpu_latency(s: &str) -> Result<CpuLatency, String> {
-    match s {
-        "off" => Ok(CpuLatency::Off),
-        n => n.parse().map(CpuLatency::Micros).map_err(|_| format!("{n} is neither a number of µs nor `off`")),
+    if let Some(d) = &cli.state_dir {
+        c.state_dir = d.clone();
     }
+    if let Some(d) = &cli.domain {
+        c.domain = Some(d.clone());
+    }
+    if let Some(w) = cli.workers {
+        c.workers = w;
+    }
+    if let Some(m) = &cli.model {
+        c.model = Some(m.clone());
+    }
+    if let Some(r) = &cli.record {
+        c.recording.path = Some(r.clone());
+    }
+    c.validate()?;
+    Ok(c)
 }
 
-fn config(cli: &Cli) -> anyhow::Result<DaemonConfig> {
-    let file = match &cli.config {
-        None => FileConfig::default(),
-        Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-            toml::from_str(&text).with_context(|| format!("{}", path.display()))?
-        }
-    };
-    let d = DaemonConfig::default();
-    Ok(DaemonConfig {
-        prefix: cli.prefix.clone().or(file.prefix).unwrap_or(d.prefix),
-        domain: cli.domain.clone().or(file.domain).or(d.domain),
-        state_dir: cli.state_dir.clone().or(file.state_dir).unwrap_or(d.state_dir),
-        workers: cli.workers.or(file.workers).unwrap_or(d.workers),
-        spin: cli.spin_us.or(file.spin_us).map_or(d.spin, Duration::from_micros),
-        max_clients: cli.max_clients.or(file.max_clients).unwrap_or(d.max_clients),
-        max_requests_per_client: file.max_requests_per_client.unwrap_or(d.max_requests_per_client),
-        max_queued: cli.max_queued.or(file.max_queued).unwrap_or(d.max_queued),
-        upload_idle_timeout: file.upload_idle_timeout_s.map_or(d.upload_idle_timeout, Duration::from_secs),
-        model: cli.model.clone().or(file.model).or(d.model),
-        worker_nice: match cli.worker_nice.or(file.worker_nice) {
-            Some(n) if n > 19 => anyhow::bail!("worker_nice = {n} must be 0–19"),
-            n => n.unwrap_or(d.worker_nice),
-        },
-        ipc_priority: match cli.ipc_priority.or(file.ipc_priority) {
-            Some(n) if n > 99 => anyhow::bail!("ipc_priority = {n} must be 0–99"),
-            Some(n) => n,
-            None if cli.legacy_scheduling => 0,
-            None => d.ipc_priority,
-        },
-        spin_max: match cli.spin_max_us.or(file.spin_max_us) {
-            Some(us) => Duration::from_micros(us),
-            None if cli.legacy_scheduling => Duration::ZERO,
-            None => d.spin_max,
-        },
-        fair_queue: match cli.queue.as_deref().or(file.queue.as_deref()) {
-            Some("fair") => true,
-            Some("fifo") => false,
-            Some(q) => anyhow::bail!("queue = \"{q}\" must be \"fair\" or \"fifo\""),
-            None => d.fair_queue && !cli.legacy_scheduling,
-        },
-        worker_batch: cli.worker_batch || file.worker_batch.unwrap_or(d.worker_batch),
-        worker_yield: match cli.worker_yield_us.or(file.worker_yield_us) {
-            Some(us) if us > 1_000_000 => anyhow::bail!("worker_yield_us = {us} must be at most 1000000 (1 s)"),
-            Some(us) => Duration::from_micros(us),
-            None if cli.legacy_scheduling => Duration::ZERO,
-            None => d.worker_yield,
-        },
-        worker_slice: match cli.worker_slice_us.or(file.worker_slice_us) {
-            Some(us @ (0 | 100..=100_000)) => Duration::from_micros(us),
-            Some(us) => anyhow::bail!("worker_slice_us = {us} must be 0 (the kernel's) or 100–100000 (0.1–100 ms)"),
-            None if cli.legacy_scheduling => Duration::ZERO,
-            None => d.worker_slice,
-        },
-        cpu_latency_us: match cli.cpu_latency_us.or(file.cpu_latency_us) {
-            Some(CpuLatency::Micros(us)) if us > 1_000_000 => {
-                anyhow::bail!("cpu_latency_us = {us} must be at most 1000000 (1 s), or \"off\"")
-            }
-            Some(CpuLatency::Micros(us)) => Some(us),
-            Some(CpuLatency::Off) => None,
-            None if cli.legacy_scheduling => None,
-            None => d.cpu_latency_us,
-        },
-        record: match cli.record.clone().or(file.record) {
-            None => None,
-            Some(path) => {
-                let mut r = RecordConfig::new(path);
-                r.max_bytes = cli.record_max_bytes.or(file.record_max_bytes).unwrap_or(r.max_bytes);
-                r.keep = cli.record_keep.or(file.record_keep).unwrap_or(r.keep);
-                if r.max_bytes == 0 {
-                    anyhow::bail!("record_max_bytes must be at least 1");
-                }
-                Some(r)
-            }
-        },
-    })
+/// For a command line clap refused: what became of the first flag in it that
+/// `dyfosd` no longer has.
+fn former_flag_in(args: &[String]) -> Option<String> {
+    let command = Cli::command();
+    let current: Vec<&str> = command.get_arguments().filter_map(|a| a.get_long()).collect();
+    args.iter()
+        .filter(|a| a.starts_with("--"))
+        .filter(|a| !current.contains(&a[2..].split('=').next().unwrap_or("")))
+        .find_map(|a| former_flag(a))
 }
 
 /// Serves until SIGINT/SIGTERM: answer, keep polling for the daemon's polling
@@ -273,20 +121,35 @@ fn serve(mut daemon: Daemon) {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    dyfos_client::logging::init();
+    let args: Vec<String> = std::env::args_os().map(|a| a.to_string_lossy().into_owned()).collect();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if e.use_stderr() => match former_flag_in(&args) {
+            Some(what) => {
+                eprintln!("dyfosd: {what}");
+                return ExitCode::from(2);
+            }
+            None => e.exit(),
+        },
+        Err(e) => e.exit(),
+    };
+    dyfos_process::logging::init();
     let config = match config(&cli) {
         Ok(c) => c,
         Err(e) => {
-            eprintln!("dyfosd: {e:#}");
+            eprintln!("dyfosd: {e}");
             return ExitCode::from(2);
         }
     };
+    if cli.print_config {
+        print!("{}", config.to_toml());
+        return ExitCode::SUCCESS;
+    }
     match Daemon::create(&config) {
         Ok(daemon) => {
             serve(daemon);
             // Say how many lines the rate limit left out in the last window.
-            dyfos_client::logging::flush();
+            dyfos_process::logging::flush();
             ExitCode::SUCCESS
         }
         Err(e) => {
@@ -303,7 +166,7 @@ mod tests {
 
     #[test]
     fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
-        dyfos_client::cli::assert_numeric_flags_take_signs(&<Cli as clap::CommandFactory>::command());
+        dyfos_process::cli::assert_numeric_flags_take_signs(&Cli::command());
     }
 
     fn cli(args: &[&str]) -> Cli {
@@ -311,59 +174,43 @@ mod tests {
     }
 
     #[test]
-    fn flags_override_the_file_which_overrides_defaults() {
-        let dir = std::env::temp_dir().join(format!("dyfosd-config-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let file = dir.join("dyfosd.toml");
-        std::fs::write(&file, "prefix = \"from-file/\"\nworkers = 3\nspin_us = 50\nupload_idle_timeout_s = 9\n")
-            .unwrap();
-        let c = config(&cli(&["--config", file.to_str().unwrap(), "--workers", "5"])).unwrap();
-        assert_eq!(c.prefix, "from-file/");
-        assert_eq!(c.workers, 5);
-        assert_eq!(c.spin, Duration::from_micros(50));
-        assert_eq!(c.upload_idle_timeout, Duration::from_secs(9));
-        assert_eq!(c.max_clients, DaemonConfig::default().max_clients);
-        assert_eq!(c.worker_nice, 0);
-        assert_eq!(config(&cli(&["--worker-nice", "10"])).unwrap().worker_nice, 10);
-        assert!(Cli::try_parse_from(["dyfosd", "--worker-nice", "20"]).is_err());
-        // The scheduling defaults, the legacy switch, and flags over it.
-        let d = config(&cli(&[])).unwrap();
-        assert_eq!((d.ipc_priority, d.spin_max, d.fair_queue), (10, Duration::from_millis(2), true));
-        let legacy = config(&cli(&["--legacy-scheduling"])).unwrap();
-        assert_eq!((legacy.ipc_priority, legacy.spin_max, legacy.fair_queue), (0, Duration::ZERO, false));
-        assert_eq!((d.worker_yield, legacy.worker_yield), (Duration::from_micros(50), Duration::ZERO));
-        assert_eq!(config(&cli(&["--worker-yield-us", "0"])).unwrap().worker_yield, Duration::ZERO);
-        assert!(config(&cli(&["--worker-yield-us", "2000000"])).is_err());
-        assert_eq!((d.worker_slice, legacy.worker_slice), (Duration::from_millis(3), Duration::ZERO));
-        assert_eq!(config(&cli(&["--worker-slice-us", "0"])).unwrap().worker_slice, Duration::ZERO);
-        assert!(config(&cli(&["--worker-slice-us", "99"])).is_err());
-        assert!(config(&cli(&["--worker-slice-us", "100001"])).is_err());
-        assert_eq!((d.cpu_latency_us, legacy.cpu_latency_us), (Some(0), None));
-        assert_eq!(config(&cli(&["--cpu-latency-us", "off"])).unwrap().cpu_latency_us, None);
-        assert_eq!(config(&cli(&["--cpu-latency-us", "20"])).unwrap().cpu_latency_us, Some(20));
-        assert!(Cli::try_parse_from(["dyfosd", "--cpu-latency-us", "soon"]).is_err());
-        assert!(config(&cli(&["--cpu-latency-us", "1000001"])).is_err());
+    fn flags_win_over_sets_which_win_over_the_file() {
+        let file = std::env::temp_dir().join(format!("dyfosd-flags-{}.toml", std::process::id()));
+        std::fs::write(&file, "prefix = \"from-file/\"\nworkers = 3\n[scheduling]\npoll_us = 50\n").unwrap();
+        let path = file.to_str().unwrap();
+        let c =
+            config(&cli(&["--config", path, "--set", "workers=4", "--set", "prefix=set/", "--workers", "5"])).unwrap();
+        assert_eq!((c.prefix.as_str(), c.workers, c.scheduling.poll_us), ("set/", 5, 50));
+        let c = config(&cli(&["--config", path, "--record", "/tmp/t.mcap", "--set", "recording.keep=2"])).unwrap();
+        assert_eq!((c.recording.path.as_deref(), c.recording.keep), (Some(std::path::Path::new("/tmp/t.mcap")), 2));
+        std::fs::remove_file(&file).unwrap();
+        // The flags are validated with the rest.
+        let err = config(&cli(&["--prefix", "a b"])).unwrap_err().to_string();
+        assert!(err.contains("prefix = \"a b\" is refused"), "{err}");
+        assert!(config(&cli(&["--set", "scheduling.worker_slice_us=99"])).is_err());
+    }
+
+    /// `dyfosd --help` shows an operator's few flags; the rest are keys.
+    #[test]
+    fn at_most_ten_flags_and_former_ones_say_which_key_replaced_them() {
+        let flags = Cli::command().get_arguments().count();
+        assert!(flags <= 10, "{flags} flags");
+        let args = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         for (line, want) in [
-            ("cpu_latency_us = \"off\"", Ok(None)),
-            ("cpu_latency_us = 5", Ok(Some(5))),
-            ("cpu_latency_us = \"on\"", Err(())),
+            (&["dyfosd", "--spin-us", "50"][..], "--spin-us was replaced by the key `scheduling.poll_us`"),
+            (
+                &["dyfosd", "--workers", "2", "--max-queued=3"],
+                "--max-queued=3 was replaced by the key `limits.max_queued`",
+            ),
+            (&["dyfosd", "--record-max-bytes", "9"], "`recording.max_bytes`"),
+            (&["dyfosd", "--legacy-scheduling"], "--legacy-scheduling was removed"),
         ] {
-            std::fs::write(&file, line).unwrap();
-            let got = config(&cli(&["--config", file.to_str().unwrap()])).map(|c| c.cpu_latency_us).map_err(|_| ());
-            assert_eq!(got, want, "{line}");
+            assert!(Cli::try_parse_from(line).is_err(), "{line:?} parses");
+            let said = former_flag_in(&args(line)).unwrap_or_default();
+            assert!(said.contains(want), "{line:?}: {said}");
         }
-        let mixed = config(&cli(&["--legacy-scheduling", "--queue", "fair", "--ipc-priority", "3"])).unwrap();
-        assert_eq!((mixed.ipc_priority, mixed.fair_queue), (3, true));
-        assert!(Cli::try_parse_from(["dyfosd", "--queue", "lifo"]).is_err());
-        // Recording: off by default; the limits default unless given.
-        assert_eq!(d.record, None);
-        let r = config(&cli(&["--record", "/tmp/t.mcap", "--record-keep", "2"])).unwrap().record.unwrap();
-        assert_eq!((r.path, r.keep, r.max_bytes), (PathBuf::from("/tmp/t.mcap"), 2, 256 << 20));
-        assert!(config(&cli(&["--record", "/tmp/t.mcap", "--record-max-bytes", "0"])).is_err());
-        assert!(Cli::try_parse_from(["dyfosd", "--ipc-priority", "100"]).is_err());
-        std::fs::write(&file, "prefx = \"typo/\"\n").unwrap();
-        let err = format!("{:#}", config(&cli(&["--config", file.to_str().unwrap()])).unwrap_err());
-        assert!(err.contains("unknown field `prefx`"), "{err}");
-        std::fs::remove_dir_all(&dir).unwrap();
+        // A current flag used wrongly is clap's to explain, not taken for a former one.
+        assert_eq!(former_flag_in(&args(&["dyfosd", "--record"])), None);
+        assert_eq!(former_flag_in(&args(&["dyfosd", "--sett", "x=1"])), None);
     }
 }

@@ -82,7 +82,7 @@ impl CpuLatency {
                 self.logged = true;
                 info!(
                     target_us = self.target_us,
-                    "traffic is steady: idle cores are asked to wake within {} µs (PM QoS) until {:?} without requests; `--cpu-latency-us off` turns this off",
+                    "traffic is steady: idle cores are asked to wake within {} µs (PM QoS) until {:?} without requests; `scheduling.cpu_latency_us = \"off\"` turns this off",
                     self.target_us,
                     Self::RELEASE_AFTER
                 );

@@ -27,20 +27,20 @@
 //! thread-safe iceoryx2 variant, so an accepted request can move to a worker). A
 //! `brute` query may hold at most all workers but one, so a cheap query from another
 //! client always finds a free worker. Free workers take queries fairly across
-//! clients ([`DaemonConfig::fair_queue`]).
+//! clients (`rendezvous::Queue`).
 //!
 //! Priorities: the IPC thread sleeps at `SCHED_FIFO`
-//! ([`DaemonConfig::ipc_priority`]), so a request wakes it ahead of running
+//! ([`Scheduling::ipc_priority`]), so a request wakes it ahead of running
 //! searches, and polls for the next request at normal priority, for a window that
-//! grows to [`DaemonConfig::spin_max`] while traffic is steady and is zero while
+//! grows to [`Scheduling::poll_max_us`] while traffic is steady and is zero while
 //! every worker searches. Real-time scheduling is per thread: call [`Daemon::spin`]
 //! and [`Daemon::wait`] on the thread that called [`Daemon::create`]. Where the
 //! system refuses it, the IPC thread asks for a short time slice ([`IPC_SLICE`])
 //! and, on kernels that ignore slices, the workers run [`FALLBACK_WORKER_NICE`]
 //! nice levels lower. The workers ask for a long slice
-//! ([`DaemonConfig::worker_slice`]), so any thread that wakes beside a search
+//! ([`Scheduling::worker_slice_us`]), so any thread that wakes beside a search
 //! preempts it. While traffic is steady, idle cores are asked to poll
-//! ([`DaemonConfig::cpu_latency_us`]), so a request after a pause wakes the IPC
+//! ([`Scheduling::cpu_latency_us`]), so a request after a pause wakes the IPC
 //! thread in µs.
 //!
 //! A client that goes away mid-query (killed, or dropping its pending response)
@@ -52,6 +52,7 @@
 //! daemon's next [`HOUSEKEEPING`], or sooner when any process of the domain creates
 //! a node.
 
+mod config;
 mod cpu_latency;
 mod janitor;
 mod map;
@@ -60,6 +61,10 @@ mod rendezvous;
 mod sched;
 mod stats;
 
+pub use config::{
+    ConfigError, CpuLatencyTarget, DEFAULT_IPC_PRIORITY, DEFAULT_WORKER_SLICE, DEFAULT_WORKER_YIELD, DaemonConfig,
+    Limits, Recording, Scheduling, default_state_dir, former_flag,
+};
 pub use record::RecordConfig;
 pub use rendezvous::answer_query;
 pub use sched::{IPC_SLICE, IpcScheduling};
@@ -69,7 +74,7 @@ use dyfos_shared::limits::{MAX_MAPS, SNAPSHOT_PAGE_RECORDS};
 use dyfos_shared::wire::map::{MapReplyHeader, MapRequestHeader, WireDelta};
 use dyfos_shared::wire::rendezvous::{RendezvousReply, RendezvousRequestHeader};
 use dyfos_shared::wire::stats::{StatsReply, StatsRequest};
-use dyfos_shared::wire::{DEFAULT_PREFIX, PrefixError, ServiceNames};
+use dyfos_shared::wire::{PrefixError, ServiceNames};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::server::Server;
@@ -97,142 +102,9 @@ pub const HOUSEKEEPING: Duration = Duration::from_secs(5);
 /// there (and so, at most, how long [`Daemon::wait`] sleeps meanwhile).
 pub const CLIENT_CHECK: Duration = Duration::from_millis(10);
 
-/// How the daemon runs. [`DaemonConfig::default`] is what `dyfosd` uses without flags.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct DaemonConfig {
-    /// Service-name prefix (`--prefix`), default `dyfos/`.
-    pub prefix: String,
-    /// iceoryx2 file prefix (`--domain`); `None` for iceoryx2's default `iox2_`.
-    pub domain: Option<String>,
-    /// Where maps are persisted (`--state-dir`).
-    pub state_dir: PathBuf,
-    /// Search worker threads; 0 for one per core (at least 2 are started).
-    pub workers: usize,
-    /// Most client ports per service (each `Client` holds one of each).
-    pub max_clients: usize,
-    /// Most requests one client port may have in flight.
-    pub max_requests_per_client: usize,
-    /// Most queries waiting for a worker before new ones get `busy`, per class:
-    /// `brute` queries and the others queue apart, so a flood of one class never
-    /// makes the other busy.
-    pub max_queued: usize,
-    /// How long the IPC thread keeps polling after its last request before it
-    /// sleeps on the wake-up event.
-    pub spin: Duration,
-    /// An upload with no new chunk for this long is abandoned.
-    pub upload_idle_timeout: Duration,
-    /// Model file of the learned SDSMM (`--model`), loaded at start; without one,
-    /// queries for model `learned` are refused (`unsupported_model`).
-    pub model: Option<PathBuf>,
-    /// How many nice levels below the IPC thread the search workers run (0–19,
-    /// `--worker-nice`, default 0: equal). With searches on every core, a worker at
-    /// the IPC thread's priority keeps it (and the clients) off the CPU for a time
-    /// slice, so a cheap query waits behind the searches; lower-priority workers are
-    /// preempted at once, but also yield to every other process of normal priority
-    /// (`bench/RESULTS.md`, "Why the scheduling defaults").
-    pub worker_nice: u8,
-    /// `SCHED_FIFO` priority of the IPC thread while it sleeps (1–99,
-    /// `--ipc-priority`, default [`DEFAULT_IPC_PRIORITY`]; 0: never real-time). A
-    /// request then wakes it ahead of any running search; it polls at normal
-    /// priority. Needs `CAP_SYS_NICE` or an `RLIMIT_RTPRIO` of at least this; when
-    /// refused, it asks for a short time slice instead ([`IPC_SLICE`], Linux 6.12
-    /// and later), and where the kernel takes none the workers run
-    /// [`FALLBACK_WORKER_NICE`] nice levels lower (unless `worker_nice` is set).
-    pub ipc_priority: u8,
-    /// Longest polling window (`--spin-max-us`, default 2 ms; 0: always `spin`):
-    /// while requests arrive about this often or more, the IPC thread keeps polling
-    /// this long after each, so sparse but steady traffic pays no wake-up. Polling
-    /// stops while every worker searches (real-time only) and once traffic stops,
-    /// so an idle daemon uses no CPU.
-    pub spin_max: Duration,
-    /// Serve the search queue fairly across clients (`--queue fair`, default): a
-    /// free worker takes the oldest query of the client with the fewest searches
-    /// running, so one client with many queries in flight cannot make another
-    /// wait behind all of them. `false` (`--queue fifo`): first come, first served.
-    pub fair_queue: bool,
-    /// Run the search workers as `SCHED_BATCH` (`--worker-batch`; default off).
-    pub worker_batch: bool,
-    /// How often, at most, a running search yields its core to a thread waiting for
-    /// one (`--worker-yield-us`, default [`DEFAULT_WORKER_YIELD`]; zero: never). A
-    /// process that wakes while searches run every core would otherwise often wait
-    /// for the next scheduler tick (4 ms at 250 Hz); with it, at most this long.
-    /// A search looks every 64 candidates (tens of µs) and yields only while more
-    /// threads are runnable than there are cores and it has had most of its core
-    /// lately (so CPU hogs do not get its share). Linux only; elsewhere it never
-    /// yields.
-    pub worker_yield: Duration,
-    /// Time slice the search workers ask the kernel for (`--worker-slice-us`,
-    /// default [`DEFAULT_WORKER_SLICE`]; zero: the kernel's). Longer than a normal
-    /// thread's, so on Linux 6.12 and later any normal thread that wakes where a
-    /// search runs preempts it at once; the searches' share of the CPU is unchanged
-    /// (it follows the nice level, not the slice). Linux only.
-    pub worker_slice: Duration,
-    /// While requests arrive steadily, ask that idle cores wake within this many µs
-    /// (`--cpu-latency-us`, default 0: they poll; `None`: off), released 50 ms after
-    /// the last request. A request after a pause then finds the IPC thread's core
-    /// awake at once, not halted in a power state it takes time to leave. Needs
-    /// root (`/dev/cpu_dma_latency`); without, the daemon says so once and goes on.
-    pub cpu_latency_us: Option<u32>,
-    /// Record the daemon's traffic to an MCAP file (`--record`; default off).
-    pub record: Option<RecordConfig>,
-}
-
-/// The IPC thread's default real-time priority: low among real-time threads, above
-/// every normal one.
-pub const DEFAULT_IPC_PRIORITY: u8 = 10;
-
-/// How often, at most, a search yields its core to a waiting thread by default: at
-/// every checkpoint while the conditions hold, so a thread that wakes beside a
-/// search waits for one checkpoint at most. Yielding less often lengthened the tail
-/// of cheap requests beside the searches for the same throughput (`bench/RESULTS.md`,
-/// "Why the scheduling defaults").
-pub const DEFAULT_WORKER_YIELD: Duration = Duration::from_micros(50);
-
-/// The search workers' time slice by default: above the kernel's default slice
-/// for normal threads (0.7 ms × (1 + log2 of the cores, at most 8): 0.7–2.8 ms),
-/// so a thread that wakes beside a search has the shorter one and preempts it.
-pub const DEFAULT_WORKER_SLICE: Duration = Duration::from_millis(3);
-
 /// Nice levels the workers drop when the IPC thread may neither run real-time nor
 /// have a short time slice.
 pub const FALLBACK_WORKER_NICE: u8 = 5;
-
-/// `$XDG_STATE_HOME/dyfos`, else `~/.local/state/dyfos`, else `./dyfos-state`.
-pub fn default_state_dir() -> PathBuf {
-    if let Some(d) = std::env::var_os("XDG_STATE_HOME").filter(|d| !d.is_empty()) {
-        return PathBuf::from(d).join("dyfos");
-    }
-    match std::env::var_os("HOME").filter(|d| !d.is_empty()) {
-        Some(home) => PathBuf::from(home).join(".local/state/dyfos"),
-        None => PathBuf::from("dyfos-state"),
-    }
-}
-
-impl Default for DaemonConfig {
-    fn default() -> Self {
-        DaemonConfig {
-            prefix: DEFAULT_PREFIX.to_string(),
-            domain: None,
-            state_dir: default_state_dir(),
-            workers: 0,
-            max_clients: 64,
-            max_requests_per_client: 4,
-            max_queued: 256,
-            spin: Duration::from_micros(200),
-            upload_idle_timeout: Duration::from_secs(30),
-            model: None,
-            worker_nice: 0,
-            ipc_priority: DEFAULT_IPC_PRIORITY,
-            spin_max: Duration::from_millis(2),
-            fair_queue: true,
-            worker_batch: false,
-            worker_yield: DEFAULT_WORKER_YIELD,
-            worker_slice: DEFAULT_WORKER_SLICE,
-            cpu_latency_us: Some(0),
-            record: None,
-        }
-    }
-}
 
 /// Why the daemon could not start.
 #[derive(Debug, thiserror::Error)]
@@ -243,9 +115,9 @@ pub enum DaemonCreateError {
     /// `--domain` is not a valid file-name prefix.
     #[error("iceoryx2 domain `{0}` is not a valid file-name prefix; use letters, digits and `_`, at most 32")]
     InvalidDomain(String),
-    /// A limit is zero.
-    #[error("{0} must be at least 1")]
-    InvalidLimit(&'static str),
+    /// A configuration value is out of its range.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
     /// The state directory is unusable.
     #[error(transparent)]
     Store(#[from] StoreOpenError),
@@ -277,34 +149,6 @@ pub enum DaemonCreateError {
         /// Why.
         source: std::io::Error,
     },
-}
-
-/// The configuration as the head of a recording shows it (`threads`: the workers
-/// started).
-fn config_json(c: &DaemonConfig, threads: usize) -> serde_json::Value {
-    serde_json::json!({
-        "prefix": c.prefix,
-        "domain": c.domain,
-        "state_dir": c.state_dir.display().to_string(),
-        "workers": threads,
-        "max_clients": c.max_clients,
-        "max_requests_per_client": c.max_requests_per_client,
-        "max_queued": c.max_queued,
-        "spin_us": u64::try_from(c.spin.as_micros()).unwrap_or(u64::MAX),
-        "upload_idle_timeout_s": c.upload_idle_timeout.as_secs(),
-        "model": c.model.as_ref().map(|m| m.display().to_string()),
-        "worker_nice": c.worker_nice,
-        "ipc_priority": c.ipc_priority,
-        "spin_max_us": u64::try_from(c.spin_max.as_micros()).unwrap_or(u64::MAX),
-        "queue": if c.fair_queue { "fair" } else { "fifo" },
-        "worker_batch": c.worker_batch,
-        "worker_yield_us": u64::try_from(c.worker_yield.as_micros()).unwrap_or(u64::MAX),
-        "worker_slice_us": u64::try_from(c.worker_slice.as_micros()).unwrap_or(u64::MAX),
-        "cpu_latency_us": c.cpu_latency_us,
-        "record": c.record.as_ref().map(|r| serde_json::json!({
-            "path": r.path.display().to_string(), "max_bytes": r.max_bytes, "keep": r.keep, "queue": r.queue,
-        })),
-    })
 }
 
 fn ipc_err(e: impl std::fmt::Debug) -> DaemonCreateError {
@@ -367,12 +211,12 @@ pub(crate) struct Shared {
     pub(crate) reply: Notifier<Ipc>,
     pub(crate) stats: Mutex<stats::Stats>,
     pub(crate) threads: usize,
-    /// Worker threads: `threads`, and as many spares with a fair queue (they run
-    /// queries on the cores of held searches, see `rendezvous::Queue`).
+    /// Worker threads: `threads`, and as many spares (they run queries on the
+    /// cores of held searches, see `rendezvous::Queue`).
     pub(crate) workers: usize,
     /// One per worker: its running query, watched by the IPC thread.
     pub(crate) watches: Box<[rendezvous::Watch]>,
-    /// [`DaemonConfig::worker_yield`].
+    /// [`Scheduling::worker_yield_us`].
     pub(crate) worker_yield: Duration,
     /// Weights of the learned SDSMM, if `--model` was given.
     pub(crate) learned: Option<Arc<dyfos_shared::sdsmm::Learned>>,
@@ -423,8 +267,8 @@ pub struct Daemon {
     /// The CPU latency request, held while traffic is steady.
     cpu_latency: cpu_latency::CpuLatency,
     /// Whether other work fills every core (and has for a while), looked up at most
-    /// every [`IdleCores::EVERY`](dyfos_client::idle::IdleCores::EVERY).
-    cores: dyfos_client::idle::IdleCores,
+    /// every [`IdleCores::EVERY`](dyfos_process::idle::IdleCores::EVERY).
+    cores: dyfos_process::idle::IdleCores,
     /// The recorder's writer thread, if recording.
     recorder_thread: Option<JoinHandle<()>>,
     /// The dead-process cleanup, off the IPC thread.
@@ -442,16 +286,8 @@ impl Daemon {
     /// leaves its shared memory behind), creates the services with the daemon's
     /// limits and starts the workers.
     pub fn create(config: &DaemonConfig) -> Result<Daemon, DaemonCreateError> {
+        config.validate()?;
         let names = ServiceNames::new(&config.prefix)?;
-        for (name, v) in [
-            ("max_clients", config.max_clients),
-            ("max_requests_per_client", config.max_requests_per_client),
-            ("max_queued", config.max_queued),
-        ] {
-            if v == 0 {
-                return Err(DaemonCreateError::InvalidLimit(name));
-            }
-        }
         let learned = config.model.as_deref().map(crate::learned::load_model).transpose()?;
         let iox = iceoryx_config(config.domain.as_deref())?;
         let store = Store::open(&config.state_dir)?;
@@ -473,7 +309,7 @@ impl Daemon {
         if cleanup.cleanups > 0 || cleanup.failed_cleanups > 0 {
             info!(cleaned = cleanup.cleanups, failed = cleanup.failed_cleanups, "removed resources of dead processes");
         }
-        let clients = config.max_clients;
+        let clients = config.limits.max_clients;
         let nodes = clients + 2;
         let service_name = |s: &str| ServiceName::new(s).map_err(ipc_err);
         macro_rules! create_rr {
@@ -483,7 +319,7 @@ impl Daemon {
                     .max_servers(1)
                     .max_clients(clients)
                     .max_nodes(nodes)
-                    .max_active_requests_per_client(config.max_requests_per_client)
+                    .max_active_requests_per_client(config.limits.max_requests_per_client)
                     .max_response_buffer_size(2)
                     .max_loaned_requests(2)
                     .max_borrowed_responses_per_pending_response(2)
@@ -531,7 +367,7 @@ impl Daemon {
         // holds at most one response per request it may have in flight or have
         // dropped unanswered (2 × `max_requests_per_client`); iceoryx2 would otherwise
         // preallocate for every response buffer and borrow slot as well (6× more).
-        let responses = clients * 2 * config.max_requests_per_client + 1;
+        let responses = clients * 2 * config.limits.max_requests_per_client + 1;
         macro_rules! create_server {
             ($builder:expr) => {
                 $builder
@@ -569,19 +405,22 @@ impl Daemon {
 
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = if config.workers == 0 { cores } else { config.workers }.max(2);
-        let workers = if config.fair_queue { 2 * threads } else { threads };
-        let mut maps = map::Maps::new(store, loaded.maps.into_iter().take(MAX_MAPS), config.upload_idle_timeout);
-        let (recorder, recorder_thread) = match &config.record {
+        // A spare worker per core runs the query of a starved client while a held
+        // search waits (see `rendezvous::Queue`).
+        let workers = 2 * threads;
+        let mut maps =
+            map::Maps::new(store, loaded.maps.into_iter().take(MAX_MAPS), config.limits.upload_idle_timeout());
+        let (recorder, recorder_thread) = match config.recording.record_config() {
             None => (None, None),
             Some(rc) => {
                 let maps = maps.arcs().collect();
-                let (recorder, thread) = record::Recorder::start(rc, config_json(config, threads), maps)
+                let (recorder, thread) = record::Recorder::start(&rc, config.to_json(threads), maps)
                     .map_err(|source| DaemonCreateError::Record { path: rc.path.clone(), source })?;
                 (Some(Arc::new(recorder)), thread)
             }
         };
         let shared = Arc::new(Shared {
-            queue: Mutex::new(rendezvous::Queue::new(threads, workers, config.fair_queue)),
+            queue: Mutex::new(rendezvous::Queue::new(threads, workers)),
             work: Condvar::new(),
             resume: Condvar::new(),
             reply,
@@ -589,34 +428,27 @@ impl Daemon {
             threads,
             workers,
             watches: (0..workers).map(|_| rendezvous::Watch::new()).collect(),
-            worker_yield: config.worker_yield,
+            worker_yield: config.scheduling.worker_yield(),
             learned,
             recorder: recorder.clone(),
         });
         // The IPC thread is this one: try real-time once, then poll-ready (normal)
         // until the first wait. Threads it starts are normal (SCHED_RESET_ON_FORK).
-        let (mut priority, ipc_scheduling) = sched::IpcPriority::start(config.ipc_priority);
+        let (mut priority, ipc_scheduling) = sched::IpcPriority::start(config.scheduling.ipc_priority);
         priority.lower();
-        let worker_nice = match (config.worker_nice, ipc_scheduling) {
-            (0, IpcScheduling::Refused) => FALLBACK_WORKER_NICE,
-            (n, _) => n.min(19),
-        };
-        let worker_batch = config.worker_batch;
-        let worker_slice = config.worker_slice;
+        let worker_nice = if ipc_scheduling == IpcScheduling::Refused { FALLBACK_WORKER_NICE } else { 0 };
+        let (worker_yield, worker_slice) = (config.scheduling.worker_yield(), config.scheduling.worker_slice());
         info!(
             workers = threads,
             nice = worker_nice,
-            policy = if worker_batch { "SCHED_BATCH" } else { "SCHED_OTHER" },
-            fair_queue = config.fair_queue,
-            yield_us = config.worker_yield.as_micros() as u64,
-            slice_us = worker_slice.as_micros() as u64,
-            "search workers: {} nice level(s) below the IPC thread; queue served {}; {}",
+            yield_us = config.scheduling.worker_yield_us,
+            slice_us = config.scheduling.worker_slice_us,
+            "search workers: {} nice level(s) below the IPC thread; queue served fairly across clients; {}",
             worker_nice,
-            if config.fair_queue { "fairly across clients" } else { "first come, first served" },
-            if config.worker_yield.is_zero() {
+            if worker_yield.is_zero() {
                 "a search keeps its core until the scheduler takes it".to_string()
             } else {
-                format!("a search yields its core to a waiting thread at most every {:?}", config.worker_yield)
+                format!("a search yields its core to a waiting thread at most every {worker_yield:?}")
             }
         );
         let janitor = janitor::Janitor::start(&iox, HOUSEKEEPING)
@@ -627,9 +459,6 @@ impl Daemon {
                 std::thread::Builder::new()
                     .name(format!("dyfos-worker-{i}"))
                     .spawn(move || {
-                        if worker_batch && let Err(e) = sched::set_batch() {
-                            warn!("cannot make a search worker SCHED_BATCH ({e}); it stays SCHED_OTHER");
-                        }
                         if !worker_slice.is_zero()
                             && let Err(e) = sched::set_slice(worker_slice)
                         {
@@ -673,10 +502,10 @@ impl Daemon {
             last_arrival: Instant::now(),
             arrival_gap_us: f64::INFINITY,
             cpu_latency: cpu_latency::CpuLatency::open(
-                config.cpu_latency_us,
+                config.scheduling.cpu_latency_us.micros(),
                 std::path::Path::new(cpu_latency::CpuLatency::DEVICE),
             ),
-            cores: dyfos_client::idle::IdleCores::new(cores),
+            cores: dyfos_process::idle::IdleCores::new(cores),
             recorder_thread,
             janitor,
         })
@@ -790,10 +619,10 @@ impl Daemon {
     }
 
     /// How long the IPC thread should keep polling after the last request before
-    /// it sleeps: [`DaemonConfig::spin_max`] while requests arrive about that often,
-    /// else [`DaemonConfig::spin`]. Unless real-time scheduling is off, zero while
+    /// it sleeps: [`Scheduling::poll_max_us`] while requests arrive about that often,
+    /// else [`Scheduling::poll_us`]. Unless real-time scheduling is off, zero while
     /// every worker searches or other threads have filled every core for a while
-    /// ([`IdleCores::LASTING`](dyfos_client::idle::IdleCores::LASTING)): a polling
+    /// ([`IdleCores::LASTING`](dyfos_process::idle::IdleCores::LASTING)): a polling
     /// thread that yields waits a whole time slice behind the busy ones, where a
     /// sleeping one is woken ahead of them (real-time, or above the niced workers).
     /// A client that spins a moment for its reply does not end the poll: stopping
@@ -801,7 +630,7 @@ impl Daemon {
     /// scheduling defaults"). A non-zero window returns the thread to normal
     /// priority first, so its polling yields to every other thread.
     pub fn poll_window(&mut self) -> Duration {
-        let window = if self.steady() { self.config.spin_max } else { self.config.spin };
+        let window = if self.steady() { self.config.scheduling.poll_max() } else { self.config.scheduling.poll() };
         if window.is_zero() || self.ipc_scheduling == IpcScheduling::Off {
             return window;
         }
@@ -815,9 +644,10 @@ impl Daemon {
         window
     }
 
-    /// Whether requests arrive about every [`DaemonConfig::spin_max`] or more often.
+    /// Whether requests arrive about every [`Scheduling::poll_max_us`] or more often.
     fn steady(&self) -> bool {
-        self.config.spin_max > self.config.spin && self.arrival_gap_us <= self.config.spin_max.as_secs_f64() * 1e6
+        let s = &self.config.scheduling;
+        s.poll_max_us > s.poll_us && self.arrival_gap_us <= s.poll_max().as_secs_f64() * 1e6
     }
 
     /// Whether SIGINT or SIGTERM arrived.

@@ -16,7 +16,10 @@
 //!
 //! Every message is JSON (`message_encoding` `json`) with a JSON Schema
 //! (`jsonschema`), so Foxglove shows it as it is. Floating-point numbers are
-//! written in the shortest form that parses back to the same bits.
+//! written in the shortest form that parses back to the same bits. [`replay`]
+//! re-runs a recording's queries against this build.
+
+pub mod replay;
 
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::params::{ModelKind, Params};
@@ -37,17 +40,18 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use tracing::{error, info, warn};
 
-/// How `dyfosd` records (`--record`, `--record-max-bytes`, `--record-keep`).
+/// How the recorder writes: the `[recording]` keys of
+/// [`DaemonConfig`](super::DaemonConfig), and its queue.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RecordConfig {
     /// The file being written (`--record FILE.mcap`); rotated files are
     /// `FILE.1.mcap` (the newest) to `FILE.K.mcap`.
     pub path: PathBuf,
-    /// A file is rotated once it is this large (`--record-max-bytes`, default
+    /// A file is rotated once it is this large (`recording.max_bytes`, default
     /// [`DEFAULT_MAX_BYTES`]). The head of a file (configuration and map states)
     /// is written whole, so a file may exceed it by one head and one message.
     pub max_bytes: u64,
-    /// Rotated files kept besides the current one (`--record-keep`, default
+    /// Rotated files kept besides the current one (`recording.keep`, default
     /// [`DEFAULT_KEEP`]); 0 deletes a full file instead of keeping it.
     pub keep: usize,
     /// Records waiting for the writer before new ones are dropped (default

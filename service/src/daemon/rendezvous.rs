@@ -84,11 +84,11 @@ impl Watch {
 
 /// The queries waiting for workers, in two classes: `brute` (heavy) may occupy
 /// all workers but one, so a cheap query always finds a free worker. Within a
-/// class, a fair queue gives a free worker the oldest query of the client with the
-/// fewest searches running (so a client with many queries in flight takes its
-/// turn with the others); a FIFO one, the oldest query.
+/// class, a free worker takes the oldest query of the client with the fewest
+/// searches running (so a client with many queries in flight takes its turn with
+/// the others).
 ///
-/// A fair queue also does not make a client wait for another's searches to end:
+/// Nor does a client wait for another's searches to end:
 /// when every core searches and a query comes from a client with none running, one
 /// `dyfos`-class search of the client with the most running is held at its next
 /// checkpoint (within 64 candidates), and a spare worker runs the new query on its
@@ -106,7 +106,6 @@ pub(crate) struct Queue {
     /// Running and not held.
     active: usize,
     closed: bool,
-    fair: bool,
     /// Clients with searches running and how many each: at most one entry per
     /// worker, allocated once.
     running_by: Vec<(ClientKey, usize)>,
@@ -123,9 +122,9 @@ struct OnWorker {
 }
 
 impl Queue {
-    /// For `cores` searches at a time, on `workers` worker threads (more than
-    /// `cores` only for a fair queue: the spares).
-    pub(crate) fn new(cores: usize, workers: usize, fair: bool) -> Self {
+    /// For `cores` searches at a time, on `workers` worker threads (those beyond
+    /// `cores` are the spares).
+    pub(crate) fn new(cores: usize, workers: usize) -> Self {
         Queue {
             light: VecDeque::new(),
             heavy: VecDeque::new(),
@@ -135,7 +134,6 @@ impl Queue {
             cores,
             active: 0,
             closed: false,
-            fair,
             running_by: Vec::with_capacity(workers),
             on_worker: vec![None; workers],
         }
@@ -154,7 +152,7 @@ impl Queue {
     /// Whether a light query waits whose client has no search running: it goes
     /// before held searches.
     fn starved(&self) -> bool {
-        self.fair && self.light.iter().any(|j| self.running_of(j.client) == 0)
+        self.light.iter().any(|j| self.running_of(j.client) == 0)
     }
 
     /// The worker whose search should be held for a starved query, if every core
@@ -264,9 +262,6 @@ impl Queue {
 
     /// Index of the job to take next from one class's queue.
     fn next_of(&self, heavy: bool) -> usize {
-        if !self.fair {
-            return 0;
-        }
         let queue = if heavy { &self.heavy } else { &self.light };
         fair_pick(queue.iter().map(|j| j.client), &self.running_by)
     }
@@ -367,11 +362,11 @@ pub(crate) fn worker(shared: &Shared, index: usize) {
 ///   yield lets the scheduler pick it within `worker_yield`; the search goes on
 ///   when it is its turn again (`bench/RESULTS.md`, "Why the scheduling defaults").
 /// - it **holds** the search while the IPC thread asked it to give its core to a
-///   starved query (see [`Queue`]; fair queue, not `brute`).
+///   starved query (see [`Queue`]; not `brute`).
 struct WorkerCheckpoint<'s> {
     shared: &'s Shared,
     worker: usize,
-    /// Whether the search may be held (fair queue with spare workers, not heavy).
+    /// Whether the search may be held (spare workers, not heavy).
     holdable: bool,
 }
 
@@ -404,7 +399,7 @@ impl WorkerCheckpoint<'_> {
         }
         share.update(now, super::sched::thread_cpu_time());
         SHARE.set(Some(share));
-        if share.recent >= MAKE_WAY_ABOVE && CORES.with(dyfos_client::idle::IdleCores::busy) {
+        if share.recent >= MAKE_WAY_ABOVE && CORES.with(dyfos_process::idle::IdleCores::busy) {
             std::thread::yield_now();
         }
     }
@@ -412,7 +407,7 @@ impl WorkerCheckpoint<'_> {
 
 thread_local! {
     /// Whether the machine's cores are all taken, for [`WorkerCheckpoint::make_way`].
-    static CORES: dyfos_client::idle::IdleCores = dyfos_client::idle::IdleCores::of_this_machine();
+    static CORES: dyfos_process::idle::IdleCores = dyfos_process::idle::IdleCores::of_this_machine();
     /// How much of its core this thread had in its searches lately.
     static SHARE: Cell<Option<CoreShare>> = const { Cell::new(None) };
 }
@@ -658,7 +653,7 @@ fn accept(daemon: &mut Daemon, header: &RendezvousRequestHeader, records: &[Wire
     if mode == Mode::Solve {
         let heavy = is_heavy(request.algorithm);
         let queued = lock(&daemon.shared.queue).queued_of(heavy);
-        if queued >= daemon.config.max_queued {
+        if queued >= daemon.config.limits.max_queued {
             let class = if heavy { "brute" } else { "non-brute" };
             return Err(Rejection::new(
                 Status::Busy,
@@ -778,9 +773,9 @@ mod tests {
 
     #[test]
     fn heavy_jobs_leave_one_worker_free() {
-        let mut q = Queue::new(2, 4, true);
+        let mut q = Queue::new(2, 4);
         assert_eq!(q.heavy_limit, 1);
-        assert_eq!(Queue::new(8, 8, false).heavy_limit, 7);
+        assert_eq!(Queue::new(8, 16).heavy_limit, 7);
         assert_eq!(q.pending(), 0);
         q.running_heavy = 1;
         q.running = 1;

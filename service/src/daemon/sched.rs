@@ -16,7 +16,7 @@ use tracing::{info, warn};
 pub enum IpcScheduling {
     /// `SCHED_FIFO` at this priority while it sleeps and answers what woke it.
     Realtime(u8),
-    /// Real-time scheduling was turned off (`--ipc-priority 0`).
+    /// Real-time scheduling was turned off (`scheduling.ipc_priority = 0`).
     Off,
     /// The system refused real-time scheduling; the IPC thread asks for a short
     /// time slice instead ([`IPC_SLICE`]), which the kernel took (Linux 6.12 and
@@ -133,17 +133,6 @@ fn set_normal() -> std::io::Result<()> {
     if r == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
 }
 
-/// `SCHED_BATCH` for the calling thread (a search worker): CPU-bound, never
-/// preempts on wake-up, same share of the CPU as normal threads.
-#[cfg(target_os = "linux")]
-#[allow(unsafe_code)]
-pub(crate) fn set_batch() -> std::io::Result<()> {
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: as in `set_fifo`: a valid `sched_param` on the stack, pid 0 = this thread.
-    let r = unsafe { libc::sched_setscheduler(0, libc::SCHED_BATCH, &param) };
-    if r == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
-}
-
 /// `SCHED_FLAG_RESET_ON_FORK` of `sched_attr.sched_flags` (libc has no constant).
 /// (`SCHED_FLAG_KEEP_POLICY` would spare reading the policy first, but the kernel
 /// then ignores this flag.)
@@ -167,7 +156,7 @@ struct SchedAttr {
 }
 
 /// Asks the kernel for a time slice of `slice` for the calling thread, keeping its
-/// policy (`SCHED_OTHER` or `SCHED_BATCH`) and nice level. Its share of the CPU
+/// policy and nice level. Its share of the CPU
 /// stays that of its nice level; what changes is who waits at a wake-up: EEVDF
 /// (Linux 6.12 on) lets a thread with a shorter slice preempt the running one at
 /// once, so any normal thread that wakes on a core where a search runs (a client
@@ -254,11 +243,6 @@ pub(crate) fn slice() -> Option<Duration> {
     None
 }
 
-#[cfg(not(target_os = "linux"))]
-pub(crate) fn set_batch() -> std::io::Result<()> {
-    Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "SCHED_BATCH is Linux only"))
-}
-
 #[cfg(all(test, target_os = "linux"))]
 mod tests {
     use super::*;
@@ -272,8 +256,8 @@ mod tests {
 
     /// A worker's slice is what it asked for, and asking keeps its nice level and
     /// policy (the call sets the nice level, so a wrong one would either fail
-    /// unprivileged or change the searches' share; `--worker-batch` must stay
-    /// `SCHED_BATCH`). Kernels that report no slice (before 6.12) ignore it.
+    /// unprivileged or change the searches' share). Kernels that report no slice
+    /// (before 6.12) ignore it.
     #[test]
     fn a_slice_asked_for_is_taken_and_keeps_the_nice_level() {
         std::thread::spawn(|| {
@@ -287,9 +271,8 @@ mod tests {
             assert_eq!(slice(), Some(Duration::from_millis(3)));
             assert_eq!(rustix::process::getpriority_process(Some(tid)).unwrap(), 3);
             assert_eq!(policy(), libc::SCHED_OTHER as u32);
-            set_batch().unwrap();
             set_slice(Duration::from_millis(2)).unwrap();
-            assert_eq!((slice(), policy()), (Some(Duration::from_millis(2)), libc::SCHED_BATCH as u32));
+            assert_eq!((slice(), policy()), (Some(Duration::from_millis(2)), libc::SCHED_OTHER as u32));
             set_slice(IPC_SLICE).unwrap();
             assert_eq!(slice(), Some(IPC_SLICE));
             // The IPC thread starts the workers and the cleanup thread after asking:

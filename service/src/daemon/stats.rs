@@ -111,7 +111,7 @@ pub(super) fn on_request(
     active: iceoryx2::active_request::ActiveRequest<super::Ipc, StatsRequest, (), StatsReply, ()>,
 ) {
     let request = *active.payload();
-    let log = dyfos_client::logging::counters();
+    let log = dyfos_process::logging::counters();
     let (queued, running) = daemon.shared.queue.lock().map_or((0, 0), |q| (q.queued() as u64, q.running() as u64));
     let reply = match daemon.shared.stats.lock() {
         Ok(mut s) => StatsReply {

@@ -23,11 +23,11 @@
 //! stops ≈0.04 above the grid optimum; the polish closes that gap and lands at or
 //! below `brute` on the median map. The mirror start catches the evolution settling
 //! on the wrong side of the rover, where an axis-aligned noise model (`anisotropic`,
-//! `learned`) has the same shape and only glare and obstacles differ. The first
-//! polish, a compass search ([`Polish::Compass`]), stalled on the ridge |u| = |v| of
-//! the image error and spent its evaluations walking flat directions. Today's
-//! figures: `bench/RESULTS.md`, "Numerical"; the runs that chose between the three
-//! polishes: `bench/history/2026-11.md`.
+//! `learned`) has the same shape and only glare and obstacles differ. A compass
+//! search (± each axis at one shared step), the first polish, stalled on the ridge
+//! |u| = |v| of the image error and spent its evaluations walking flat directions.
+//! Today's figures: `bench/RESULTS.md`, "Numerical"; the runs that chose between
+//! the polishes: `bench/history/2026-11.md`.
 
 use super::{Evaluator, Search, SearchControl, SearchOutcome};
 use crate::lupp::Lupp;
@@ -46,14 +46,6 @@ type Member = [f64; DIMS];
 pub enum Polish {
     /// None: SciPy's answer as it is.
     Off,
-    /// Compass search: ± each axis at one shared step (1/32 of the box at first);
-    /// on each axis the first improving direction is taken; the step halves after a
-    /// sweep without an improvement, down to 1e-5. The first `dyfos` default, kept
-    /// for comparison (`bench/history/2026-11.md`).
-    Compass {
-        /// Most evaluations.
-        evaluations: u64,
-    },
     /// Adaptive pattern search: first the image centre (ψ = 0, φ = 0, both), then
     /// moves along ± each axis and the two (ψ, φ) diagonals, each pair with its own
     /// step, doubled (up to 1/4) after a success and halved after both directions
@@ -234,7 +226,6 @@ impl Search for DifferentialEvolution {
         if eval.stopped().is_none() && energies[0].is_finite() {
             match self.polish {
                 Polish::Off => {}
-                Polish::Compass { evaluations } => compass(&mut eval, lupp, pop[0], energies[0], evaluations),
                 Polish::Adaptive { evaluations } => adaptive(&mut eval, lupp, pop[0], energies[0], evaluations),
                 Polish::Mirrored { evaluations } => {
                     adaptive(&mut eval, lupp, pop[0], energies[0], evaluations);
@@ -260,42 +251,6 @@ fn moved(x: &Member, dir: &Member, step: f64) -> Member {
         }
     }
     y
-}
-
-/// [`Polish::Compass`] from `start` (energy `e0`).
-fn compass(eval: &mut Evaluator, lupp: &Lupp, start: Member, e0: f64, max_evals: u64) {
-    let space = *lupp.space();
-    let (mut x, mut ex) = (start, e0);
-    let mut step = 1.0 / 32.0;
-    let limit = eval.stats.total.saturating_add(max_evals);
-    while step >= 1e-5 {
-        let mut improved = false;
-        for j in 0..DIMS {
-            for sign in [1.0, -1.0] {
-                if eval.stats.total >= limit {
-                    return;
-                }
-                let mut dir = [0.0; DIMS];
-                dir[j] = sign;
-                let y = moved(&x, &dir, step);
-                if y == x {
-                    continue;
-                }
-                let Some(e) = eval.evaluate(&space.from_unit(&y)) else {
-                    return;
-                };
-                let ey = energy(Some(e));
-                if ey < ex {
-                    (x, ex) = (y, ey);
-                    improved = true;
-                    break;
-                }
-            }
-        }
-        if !improved {
-            step /= 2.0;
-        }
-    }
 }
 
 /// Direction pairs of [`Polish::Adaptive`]: each axis, then the (ψ, φ) diagonals.

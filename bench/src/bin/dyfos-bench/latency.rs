@@ -11,8 +11,8 @@
 
 use anyhow::{Context, bail};
 use dyfos_bench::latency::{
-    Arrivals, CHURN_PER_SECOND, FloorClient, GREEDY_IN_FLIGHT, GreedyClient, Latencies, RequestSet, RunSamples,
-    Workload, drive, in_process, map_id, serve_floor,
+    Arrivals, CHURN_PER_SECOND, FloorClient, GreedyClient, Latencies, RequestSet, RunSamples, Workload, drive,
+    in_process, map_id, serve_floor,
 };
 use dyfos_bench::svg::{Series, line_plot};
 use dyfos_client::{Client, ClientConfig, RendezvousError};
@@ -56,7 +56,7 @@ pub struct LatencyArgs {
     /// The daemon binary (default: `dyfosd` next to this executable).
     #[arg(long)]
     dyfosd: Option<PathBuf>,
-    /// A flag for the daemon, e.g. `--daemon-arg=--spin-us=1000`; repeatable.
+    /// A flag for the daemon, e.g. `--daemon-arg=--set=scheduling.poll_us=1000`; repeatable.
     #[arg(long = "daemon-arg", value_name = "FLAG", allow_hyphen_values = true)]
     daemon_args: Vec<String>,
     /// Mixed run: null-query rate (one client, open loop) while `--mixed-dyfos-clients`
@@ -67,10 +67,16 @@ pub struct LatencyArgs {
     #[arg(long, default_value_t = 4)]
     mixed_dyfos_clients: usize,
     /// Before/after: also run the one-client closed loops, the first null rate in
-    /// open loop and the mixed run against a second daemon started with these extra
-    /// flags (e.g. `--compare-daemon-arg=--worker-nice=10`), in the same run.
+    /// open loop, the mixed run and the contention runs against a second daemon
+    /// started with these extra flags (e.g.
+    /// `--compare-daemon-arg=--set=scheduling.worker_slice_us=0`), in the same run.
     #[arg(long = "compare-daemon-arg", value_name = "FLAG", allow_hyphen_values = true)]
     compare_daemon_args: Vec<String>,
+    /// Before/after: the second daemon's binary, e.g. a build of an earlier commit
+    /// in a `git worktree` (default: the first daemon's). Runs the comparison even
+    /// without `--compare-daemon-arg`.
+    #[arg(long, value_name = "FILE")]
+    compare_dyfosd: Option<PathBuf>,
     /// Directory for the table (markdown), summary (JSON) and plots (SVG); the
     /// `--compare-daemon-arg` daemon's rows go to `latency-compare.json`.
     #[arg(long, default_value = "bench/out")]
@@ -79,20 +85,20 @@ pub struct LatencyArgs {
     /// event (`ClientConfig::spin`), µs; default: the client library's default.
     #[arg(long)]
     client_spin_us: Option<u64>,
-    /// Skip the runs of the scheduling goals (`stats` and map requests beside `dyfos`
-    /// clients, CPU hogs, a greedy client, idle CPU); they also run against the
-    /// `--compare-daemon-arg` daemon.
+    /// Skip the contention runs (cheap requests while searches run: `stats` and map
+    /// requests beside `dyfos` clients, CPU hogs, a greedy client, clients that come
+    /// and go, idle CPU); they also run against the second daemon.
     #[arg(long)]
-    skip_goals: bool,
+    skip_contention: bool,
     /// Keep each client process's raw samples (JSON, one file per client and
     /// configuration, numbered in the order they ran) in this directory, for
     /// looking at a distribution beyond its percentiles.
     #[arg(long)]
     samples: Option<PathBuf>,
-    /// Goals: seconds without traffic over which the daemon's idle CPU is measured.
+    /// Contention runs: seconds without traffic over which the daemon's idle CPU is measured.
     #[arg(allow_hyphen_values = true, long, default_value_t = 30.0)]
     idle_seconds: f64,
-    /// Goals: CPU hog processes beside the daemon (default: one per core).
+    /// Contention runs: CPU hog processes beside the daemon (default: one per core).
     #[arg(long)]
     hogs: Option<usize>,
 }
@@ -665,13 +671,20 @@ pub fn run(args: &LatencyArgs) -> anyhow::Result<()> {
     let (load_before, machine_before) = (load_average(), MachineTicks::now());
     let result = run_with_daemon(&b, &dyfosd).and_then(|(mut report, rows, shutdown, idle)| {
         let mut compared = None;
-        if !args.compare_daemon_args.is_empty() {
-            let (baseline, idle) = run_baseline(&b, &dyfosd)?;
-            report.push_str(&before_after(&rows, &baseline, &args.compare_daemon_args));
+        if !args.compare_daemon_args.is_empty() || args.compare_dyfosd.is_some() {
+            let other = args.compare_dyfosd.as_deref().unwrap_or(&dyfosd);
+            let (baseline, idle) = run_baseline(&b, other)?;
+            report.push_str(&before_after(&rows, &baseline, &second_daemon(args)));
             compared = Some((baseline, idle));
         }
-        if !args.skip_goals {
-            report.push_str(&goals(args, &rows, idle, compared.as_ref().map(|(r, i)| (r.as_slice(), *i))));
+        if let Some(idle) = idle {
+            let seconds = args.idle_seconds;
+            let _ =
+                write!(report, "\nIdle: dyfosd used {:.2} % of a core over {seconds} s without traffic", idle * 100.0);
+            if let Some(other) = compared.as_ref().and_then(|(_, i)| *i) {
+                let _ = write!(report, "; {} {:.2} %", second_daemon(args), other * 100.0);
+            }
+            report.push_str(".\n");
         }
         let baseline = compared.map(|(r, _)| r).unwrap_or_default();
         report.push_str(&steal_note(machine_before, &rows, &baseline));
@@ -787,7 +800,7 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
                 served.map_err(anyhow::Error::msg)?;
             }
             Workload::Greedy | Workload::Hog | Workload::Churn => {
-                bail!("`{}` runs only in the goals (leave it out of --workloads)", w.name())
+                bail!("`{}` runs only in the contention runs (leave it out of --workloads)", w.name())
             }
             Workload::Null | Workload::Dyfos | Workload::Stats | Workload::Map => {
                 for n in &a.clients {
@@ -819,9 +832,9 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
         ])?);
     }
     let mut idle = None;
-    if !a.skip_goals {
-        let mut groups = goal_groups(a);
-        if let Some(h) = goal_hogs(a) {
+    if !a.skip_contention {
+        let mut groups = contention_groups(a);
+        if let Some(h) = contention_hogs(a) {
             groups.insert(0, vec![Group::closed(Workload::Hog, h)]);
         }
         for g in groups {
@@ -883,16 +896,16 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     Ok((report, rows, shutdown, idle))
 }
 
-/// Hog processes of the goals: `--hogs`, default one per core; `None` for 0.
-fn goal_hogs(a: &LatencyArgs) -> Option<usize> {
+/// Hog processes of the contention runs: `--hogs`, default one per core; `None` for 0.
+fn contention_hogs(a: &LatencyArgs) -> Option<usize> {
     let h = a.hogs.unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()));
     (h > 0).then_some(h)
 }
 
-/// The configurations of the scheduling goals that both daemons run (the null mix is
+/// The contention runs, which both daemons run (the null mix is
 /// the mixed run): `stats` and map requests beside the `dyfos` clients, those
 /// clients alone and beside CPU hogs, and a greedy client beside one `dyfos` client.
-fn goal_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
+fn contention_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
     let n = a.mixed_dyfos_clients.max(1);
     let rate = if a.mixed_null_rate > 0.0 { a.mixed_null_rate } else { 1000.0 };
     let mut g = vec![
@@ -900,7 +913,7 @@ fn goal_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
         vec![Group::open(Workload::Map, 1, rate), Group::closed(Workload::Dyfos, n)],
         vec![Group::closed(Workload::Dyfos, n)],
     ];
-    if let Some(h) = goal_hogs(a) {
+    if let Some(h) = contention_hogs(a) {
         g.push(vec![Group::closed(Workload::Hog, h), Group::closed(Workload::Dyfos, n)]);
     }
     g.push(vec![Group::closed(Workload::Greedy, 1), Group::closed(Workload::Dyfos, 1)]);
@@ -936,14 +949,14 @@ fn baseline_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
     configs
 }
 
-/// Runs [`baseline_groups`] (and the goals' groups and idle time) against a daemon
-/// started with `--compare-daemon-arg`s.
+/// Runs [`baseline_groups`] (and the contention runs and idle time) against the
+/// second daemon: `dyfosd`, started with the `--compare-daemon-arg`s.
 fn run_baseline(b: &Bench, dyfosd: &Path) -> anyhow::Result<(Vec<Row>, Option<f64>)> {
     let a = b.args;
     let set = RequestSet::new(a.seed, a.maps);
     let state = b.tmp.join("state-baseline");
     let log = b.tmp.join("dyfosd-baseline.log");
-    eprintln!("latency: second daemon with {}", a.compare_daemon_args.join(" "));
+    eprintln!("latency: second daemon, {}", second_daemon(a));
     let mut daemon = start_daemon(b, dyfosd, &a.compare_daemon_args, &state, &log)?;
     b.daemon_pid.set(daemon.id());
     drop(connect_and_upload(b, &set, &log, "second dyfosd")?);
@@ -952,8 +965,8 @@ fn run_baseline(b: &Bench, dyfosd: &Path) -> anyhow::Result<(Vec<Row>, Option<f6
         rows.extend(b.run_groups(&groups)?);
     }
     let mut idle = None;
-    if !a.skip_goals {
-        for groups in goal_groups(a) {
+    if !a.skip_contention {
+        for groups in contention_groups(a) {
             rows.extend(b.run_groups(&groups)?);
         }
         idle = measure_idle(b, daemon.id());
@@ -965,13 +978,22 @@ fn run_baseline(b: &Bench, dyfosd: &Path) -> anyhow::Result<(Vec<Row>, Option<f6
     Ok((rows, idle))
 }
 
+/// The second daemon of a before/after run, as its table heading names it.
+fn second_daemon(a: &LatencyArgs) -> String {
+    let mut what = match &a.compare_dyfosd {
+        Some(bin) => format!("`{}`", bin.display()),
+        None => "dyfosd".to_string(),
+    };
+    if !a.compare_daemon_args.is_empty() {
+        let _ = write!(what, " with `{}`", a.compare_daemon_args.join(" "));
+    }
+    what
+}
+
 /// The same configurations with the first daemon (before) and the second (after).
-fn before_after(before: &[Row], after: &[Row], flags: &[String]) -> String {
-    let mut out = format!(
-        "\n### The same configurations, same run: dyfosd as above (left) and with `{}` (right)\n\n",
-        flags.join(" ")
-    );
-    out.push_str("| configuration | answered /s | p50 µs | p99 µs | dyfosd CPU | with the flags: answered /s | p50 µs | p99 µs | dyfosd CPU |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+fn before_after(before: &[Row], after: &[Row], second: &str) -> String {
+    let mut out = format!("\n### The same configurations, same run: dyfosd as above (left) and {second} (right)\n\n");
+    out.push_str("| configuration | answered /s | p50 µs | p99 µs | dyfosd CPU | the second: answered /s | p50 µs | p99 µs | dyfosd CPU |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
     let same = |x: &Row, y: &Row| {
         x.workload == y.workload && x.clients == y.clients && x.rate == y.rate && x.alongside == y.alongside
     };
@@ -990,181 +1012,11 @@ fn before_after(before: &[Row], after: &[Row], flags: &[String]) -> String {
     out
 }
 
-/// The row of `w` with `clients` at `rate`, run beside a group of `beside` (or
-/// alone); the last such row, the one run nearest the goals' other runs.
-fn pick(rows: &[Row], w: Workload, clients: usize, rate: Option<f64>, beside: Option<Workload>) -> Option<&Row> {
-    rows.iter().rev().find(|r| {
-        r.workload == w
-            && r.clients == clients
-            && r.rate == rate
-            && match (beside, &r.alongside) {
-                (None, None) => true,
-                (Some(o), Some(text)) => text.split(" + ").any(|g| g.starts_with(&format!("{} ", o.name()))),
-                _ => false,
-            }
-    })
-}
-
-/// One goal's cell from a daemon's rows and idle CPU: the text, and whether met.
-type GoalCell<'a> = dyn Fn(&[Row], Option<f64>) -> (String, Option<bool>) + 'a;
-
-/// The scheduling goals (cheap requests while searches run), one row each, for the
-/// daemon of the run and (if any) the `--compare-daemon-arg` one; "met" is for the
-/// first.
-fn goals(a: &LatencyArgs, rows: &[Row], idle: Option<f64>, other: Option<(&[Row], Option<f64>)>) -> String {
-    let n = a.mixed_dyfos_clients.max(1);
-    let rate = if a.mixed_null_rate > 0.0 { a.mixed_null_rate } else { 1000.0 };
-    let flags = a.compare_daemon_args.join(" ");
-    let mut out = String::from("\n### Targets: cheap requests while searches run\n\n");
-    if other.is_some() {
-        let _ = writeln!(out, "| target | dyfosd as above | with `{flags}` | met |\n|---|---|---|---|");
-    } else {
-        out.push_str("| target | measured | met |\n|---|---|---|\n");
-    }
-    let yes = |ok: Option<bool>| match ok {
-        Some(true) => "yes",
-        Some(false) => "**no**",
-        None => "–",
-    };
-    let mut line = |target: String, cell: &GoalCell| {
-        let (mine, ok) = cell(rows, idle);
-        match other {
-            Some((o, oi)) => {
-                let _ = writeln!(out, "| {target} | {mine} | {} | {} |", cell(o, oi).0, yes(ok));
-            }
-            None => {
-                let _ = writeln!(out, "| {target} | {mine} | {} |", yes(ok));
-            }
-        }
-    };
-    let lat = |l: Option<Latencies>| {
-        l.map_or("–".to_string(), |l| format!("p50 {} µs, p99 {} µs", us(l.p50_us), us(l.p99_us)))
-    };
-    for w in [Workload::Null, Workload::Stats, Workload::Map] {
-        line(
-            format!(
-                "{} requests ({rate:.0}/s, open loop) beside {n} clients running `dyfos` back to back: p50 ≤ 50 µs, p99 ≤ 1 ms",
-                w.name()
-            ),
-            &|r, _| {
-                let row = pick(r, w, 1, Some(rate), Some(Workload::Dyfos));
-                let l = row.and_then(|r| r.latency);
-                // The client's own wake-up delay is part of the latency; say how much.
-                let sent = row.and_then(|r| r.from_send).map_or(String::new(), |f| {
-                    format!(" (from the send: p50 {} µs, p99 {} µs)", us(f.p50_us), us(f.p99_us))
-                });
-                (format!("{}{sent}", lat(l)), l.map(|l| l.p50_us <= 50.0 && l.p99_us <= 1000.0))
-            },
-        );
-    }
-    // The dyfos clients' throughput beside the cheap requests, summed over the three runs.
-    let beside_cheap = |r: &[Row]| -> Option<f64> {
-        [Workload::Null, Workload::Stats, Workload::Map]
-            .iter()
-            .map(|w| pick(r, Workload::Dyfos, n, None, Some(*w)).map(|x| x.throughput))
-            .sum()
-    };
-    let theirs = other.and_then(|(o, _)| beside_cheap(o));
-    line(
-        format!("`dyfos` throughput of those {n} clients within 10 % of the other daemon's (sum over the three runs)"),
-        &|r, _| match (beside_cheap(r), theirs) {
-            (Some(x), Some(y)) if y > 0.0 => (format!("{x:.0}/s ({:.2} × {y:.0}/s)", x / y), Some(x >= 0.9 * y)),
-            (Some(x), _) => (format!("{x:.0}/s"), None),
-            _ => ("–".into(), None),
-        },
-    );
-    if let Some(&r0) = a.null_rates.first() {
-        let c = a.open_clients;
-        line(
-            format!("sparse: null open loop {r0:.0}/s over {c} client(s): p50 ≤ 10 µs, p99 ≤ 100 µs"),
-            &|r, _| {
-                let row = pick(r, Workload::Null, c, Some(r0), None);
-                let l = row.and_then(|r| r.latency);
-                let sent = row.and_then(|r| r.from_send).map_or(String::new(), |f| {
-                    format!(" (from the send: p50 {} µs, p99 {} µs)", us(f.p50_us), us(f.p99_us))
-                });
-                let cpu = row.map_or(String::new(), |r| format!("; dyfosd CPU {}", cpu_cell(r)));
-                (format!("{}{sent}{cpu}", lat(l)), l.map(|l| l.p50_us <= 10.0 && l.p99_us <= 100.0))
-            },
-        );
-    }
-    line(format!("idle: dyfosd CPU over {} s without traffic ≤ 1 % of a core", a.idle_seconds), &|_, i| match i {
-        Some(c) => (format!("{:.2} %", c * 100.0), Some(c <= 0.01)),
-        None => ("–".into(), None),
-    });
-    if let Some(h) = goal_hogs(a) {
-        let hogs_alone = pick(rows, Workload::Hog, h, None, None).and_then(|r| r.own_cpu);
-        line(
-            format!(
-                "CPU hog: {h} hog process(es) beside {n} `dyfos` clients: each side keeps ≥ ⅓ of what it gets alone (no starvation)"
-            ),
-            &|r, _| {
-                let alone = pick(r, Workload::Dyfos, n, None, None).map(|x| x.throughput);
-                let with = pick(r, Workload::Dyfos, n, None, Some(Workload::Hog)).map(|x| x.throughput);
-                let hog = pick(r, Workload::Hog, h, None, Some(Workload::Dyfos)).and_then(|x| x.own_cpu);
-                match (alone, with, hog, hogs_alone) {
-                    (Some(al), Some(w), Some(hc), Some(ha)) if al > 0.0 && ha > 0.0 => (
-                        format!(
-                            "`dyfos` {w:.0}/s = {:.2} × alone; hogs {hc:.2} cores = {:.2} × alone",
-                            w / al,
-                            hc / ha
-                        ),
-                        Some(w / al >= 1.0 / 3.0 && hc / ha >= 1.0 / 3.0),
-                    ),
-                    _ => ("–".into(), None),
-                }
-            },
-        );
-    }
-    line(
-        format!(
-            "greedy client ({GREEDY_IN_FLIGHT} `dyfos` queries in flight) beside one `dyfos` client: the second's p50 ≤ 2 × its p50 alone"
-        ),
-        &|r, _| {
-            let alone = pick(r, Workload::Dyfos, 1, None, None).and_then(|x| x.latency);
-            let victim = pick(r, Workload::Dyfos, 1, None, Some(Workload::Greedy));
-            let greedy = pick(r, Workload::Greedy, 1, None, Some(Workload::Dyfos)).map_or(0.0, |x| x.throughput);
-            match (victim.and_then(|v| v.latency), alone) {
-                (Some(v), Some(al)) => (
-                    format!(
-                        "{} ({:.1} × alone {} µs); greedy {greedy:.0}/s",
-                        lat(Some(v)),
-                        v.p50_us / al.p50_us,
-                        us(al.p50_us)
-                    ),
-                    Some(v.p50_us <= 2.0 * al.p50_us),
-                ),
-                _ => ("–".into(), None),
-            }
-        },
-    );
-    line(
-        format!(
-            "clients that come and go: null requests ({rate:.0}/s, open loop) while another client connects, asks for `stats` and leaves {CHURN_PER_SECOND:.0}×/s: p99 from the send ≤ 1 ms"
-        ),
-        // From the send: the visitor's own CPU (its connect) delays the sender's
-        // wake-ups too, which is the machine's doing, not the daemon's.
-        &|r, _| {
-            let row = pick(r, Workload::Null, 1, Some(rate), Some(Workload::Churn));
-            let f = row.and_then(|r| r.from_send);
-            let all = row.and_then(|r| r.latency).map_or(String::new(), |l| {
-                format!(" (from the schedule: p50 {} µs, p99 {} µs)", us(l.p50_us), us(l.p99_us))
-            });
-            let max = f.map_or(String::new(), |l| format!(", max {} µs", us(l.max_us)));
-            let visit = pick(r, Workload::Churn, 1, None, Some(Workload::Null))
-                .and_then(|x| x.latency)
-                .map_or(String::new(), |v| format!("; a visit p50 {} ms", us(v.p50_us / 1000.0)));
-            (format!("{}{max}{all}{visit}", lat(f)), f.map(|l| l.p99_us <= 1000.0))
-        },
-    );
-    out
-}
-
 fn find(rows: &[Row], w: Workload, clients: usize) -> Option<&Row> {
     rows.iter().find(|r| r.workload == w && r.clients == clients && r.rate.is_none() && r.alongside.is_none())
 }
 
-/// The floor, the in-process call and the daemon side by side, and the targets.
+/// The floor, the in-process call and the daemon side by side.
 fn comparison(rows: &[Row], baselines: &[(Workload, Row)], in_daemon: Option<InDaemon>) -> String {
     let mut out = String::from("\n### Daemon against the in-process call and the iceoryx2 floor (one client)\n\n");
     out.push_str("| path | p50 µs | p99 µs | p50 ratio to the daemon |\n|---|---:|---:|---:|\n");
@@ -1202,57 +1054,6 @@ fn comparison(rows: &[Row], baselines: &[(Workload, Row)], in_daemon: Option<InD
         );
     }
 
-    out.push_str("\n### Targets (2 cores)\n\n| target | measured | met |\n|---|---|---|\n");
-    let yes = |ok: bool| if ok { "yes" } else { "**no**" };
-    // Null query "while traffic flows": back to back, open loop, and beside dyfos load.
-    for r in rows.iter().filter(|r| r.workload == Workload::Null && (r.rate.is_some() || r.clients <= 2)) {
-        if let Some(l) = r.latency {
-            let mut what = match r.rate {
-                Some(x) => format!("open loop {x:.0}/s, {} client(s)", r.clients),
-                None => format!("closed loop, {} client(s)", r.clients),
-            };
-            if let Some(o) = &r.alongside {
-                let _ = write!(what, ", beside {o}");
-            }
-            let _ = writeln!(
-                out,
-                "| null query p50 ≤ 10 µs, p99 ≤ 50 µs ({what}) | p50 {} µs, p99 {} µs | {} |",
-                us(l.p50_us),
-                us(l.p99_us),
-                yes(l.p50_us <= 10.0 && l.p99_us <= 50.0)
-            );
-        }
-    }
-    if let Some(r) = find(rows, Workload::Dyfos, 4) {
-        let _ = writeln!(
-            out,
-            "| `dyfos` ≥ 500 queries/s with 4 clients (closed loop) | {:.0}/s | {} |",
-            r.throughput,
-            yes(r.throughput >= 500.0)
-        );
-    }
-    if let (Some(d), Some(inproc)) = (dyfos_l, base(Workload::Dyfos).and_then(|r| r.latency)) {
-        let extra = (d.p50_us - inproc.p50_us) / inproc.p50_us * 100.0;
-        let _ = writeln!(
-            out,
-            "| daemon overhead ≤ 5 % of a `dyfos` query (1 client, p50 end-to-end vs in-process) | {extra:+.1} % ({} vs {} µs) | {} |",
-            us(d.p50_us),
-            us(inproc.p50_us),
-            yes(extra <= 5.0)
-        );
-    }
-    if let Some(d) = dyfos
-        && let (Some(o), Some(s)) = (d.overhead, d.search)
-    {
-        let _ = writeln!(
-            out,
-            "| … the same per query: (end-to-end − search) / search, p50s | {} µs / {} µs = {:.1} % | {} |",
-            us(o.p50_us),
-            us(s.p50_us),
-            o.p50_us / s.p50_us * 100.0,
-            yes(o.p50_us / s.p50_us <= 0.05)
-        );
-    }
     out
 }
 
@@ -1281,6 +1082,7 @@ fn rows_json(rows: &[Row]) -> Vec<serde_json::Value> {
                 "from_send": l(r.from_send),
                 "alongside": r.alongside,
                 "daemon_cpu_cores": r.daemon_cpu,
+                "hog_cpu_cores": r.own_cpu,
                 "host_steal": r.steal,
             })
         })

@@ -65,6 +65,6 @@ mod cli_tests {
     /// Every number a dyfos command prints can be pasted back, `-7.08e-06` included.
     #[test]
     fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
-        dyfos_client::cli::assert_numeric_flags_take_signs(&<super::Cli as clap::CommandFactory>::command());
+        dyfos_process::cli::assert_numeric_flags_take_signs(&<super::Cli as clap::CommandFactory>::command());
     }
 }

@@ -30,9 +30,9 @@ pub struct NumericalArgs {
     algos: Vec<Algorithm>,
     /// Also compare a differential evolution setting, as `NAME:key=value,...` starting
     /// from the `dyfos` default; keys: popsize, tol, atol, generations, recombination,
-    /// polish (adaptive polish with at most this many evaluations), compass (the
-    /// compass-search polish instead), mirrored (the adaptive polish from the best member
-    /// and from its mirror image). Repeatable. Example: `--de before:compass=300`.
+    /// polish (adaptive polish with at most this many evaluations), mirrored (the
+    /// adaptive polish from the best member and from its mirror image). Repeatable.
+    /// Example: `--de before:polish=300`.
     #[arg(long = "de", value_name = "NAME:SETTINGS")]
     de: Vec<String>,
     /// Threads for `brute` (default: all cores); the other algorithms use one.
@@ -97,11 +97,10 @@ fn parse_de(spec: &str) -> anyhow::Result<Contender> {
             "atol" => de.atol = number,
             "generations" => de.max_generations = u32::try_from(count()?)?,
             "polish" => de.polish = Polish::Adaptive { evaluations: count()? },
-            "compass" => de.polish = Polish::Compass { evaluations: count()? },
             "mirrored" => de.polish = Polish::Mirrored { evaluations: count()? },
             "recombination" => de.recombination = number,
             _ => bail!(
-                "--de `{spec}`: unknown key `{key}` (popsize, tol, atol, generations, polish, compass, mirrored, recombination)"
+                "--de `{spec}`: unknown key `{key}` (popsize, tol, atol, generations, polish, mirrored, recombination)"
             ),
         }
     }
