@@ -663,9 +663,9 @@ mod tests {
         for (kind, _) in DELTA_EXAMPLES {
             assert!(doc.contains(&format!("{{\"{kind}\": ")), "docs/deltas.md has no {kind} example");
         }
-        // The README shows the same file.
-        let readme = include_str!("../../README.md");
-        assert!(readme.contains(&format!("```json\n{file}```")), "README.md does not show the delta file");
+        // The page on querying the daemon shows the same file.
+        let clients = include_str!("../../docs/clients.md");
+        assert!(clients.contains(&format!("```json\n{file}```")), "docs/clients.md does not show the delta file");
         // The error it shows is the one given.
         let bad = doc.split("$ cat bad.json\n").nth(1).and_then(|rest| rest.lines().next()).unwrap();
         let shown = doc.split("dyfos: bad.json: ").nth(1).and_then(|rest| rest.lines().next()).unwrap();

@@ -402,7 +402,7 @@ fn demo_on_two_hosts_prints_the_one_host_table() {
     assert_eq!(one, two, "the two-host demo's table differs from the one-host one");
 }
 
-/// The README's two-host setup, without an evaluation: at the goal the rover waits
+/// docs/cross-host.md's two-host setup, without an evaluation: at the goal the rover waits
 /// for every reader of its estimates, and on the rover's host that is the link.
 /// The viewer's link acknowledges for the (no) evaluations on its host, so the
 /// rover ends as soon as the viewer has the finish, with no warning.

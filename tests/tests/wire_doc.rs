@@ -897,12 +897,12 @@ fn documented_client_port_settings_loan_every_size_a_request_may_have() {
     }
 }
 
-/// What shared memory a daemon stopped by SIGTERM leaves is what the README and
+/// What shared memory a daemon stopped by SIGTERM leaves is what docs/daemon.md and
 /// this document say (iceoryx2's per-domain node counter), named as they name it
 /// for the default domain.
 #[test]
 fn the_shared_memory_a_stopped_daemon_leaves_is_documented() {
-    const README: &str = include_str!("../../README.md");
+    const DAEMON_DOC: &str = include_str!("../../docs/daemon.md");
     let sandbox = Sandbox::new("wire-doc-shm");
     let mut daemon = sandbox.start_daemon(&[]);
     sandbox.client().stats(std::time::Duration::from_secs(30)).expect("stats");
@@ -916,7 +916,7 @@ fn the_shared_memory_a_stopped_daemon_leaves_is_documented() {
     assert!(!left.is_empty(), "iceoryx2's node counter is expected to stay");
     for file in left {
         let default_domain = file.replacen(&sandbox.domain, "iox2_", 1);
-        for (doc, text) in [("README.md", README), ("docs/wire.md", DOC)] {
+        for (doc, text) in [("docs/daemon.md", DAEMON_DOC), ("docs/wire.md", DOC)] {
             assert!(
                 text.contains(&format!("/dev/shm/{default_domain}")),
                 "{doc} does not name `{file}` a stopped daemon left"

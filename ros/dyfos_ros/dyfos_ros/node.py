@@ -14,8 +14,8 @@ Interfaces (names relative to the node, default name ``dyfos``):
 
 Every call to the daemon goes through the ``dyfos`` binding, on worker threads
 (:mod:`dyfos_ros.worker`); the executor's threads handle ROS, and a service call's
-thread sleeps until its worker has the answer. The README's "ROS 2"
-section documents the parameters.
+thread sleeps until its worker has the answer. docs/ros2.md documents
+the parameters.
 """
 
 from __future__ import annotations
@@ -568,7 +568,7 @@ def _flatten(d: Dict[str, Any], prefix: str = ""):
 USAGE = """usage: dyfos-ros [--ros-args -p NAME:=VALUE ...]
 
 The dyfos ROS 2 node (also `ros2 run dyfos_ros dyfos_node`): asks a running dyfosd
-where a viewer should put its camera to localize a rover. Parameters (README, "ROS 2"):
+where a viewer should put its camera to localize a rover. Parameters (docs/ros2.md):
 """
 
 

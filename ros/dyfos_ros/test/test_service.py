@@ -109,10 +109,10 @@ def test_every_error_status(ros: Ros, daemon: Any, start_node: Any) -> None:
     assert ros.call(FindSensorPose, SERVICE, request(good, s)).success, "still serving"
 
 
-def test_the_readme_client_runs(ros: Ros, daemon: Any, start_node: Any, tmp_path: Path) -> None:
-    """The README's 10-line client, as printed there, gets an answer from the node."""
-    readme = (ROOT / "README.md").read_text()
-    section = readme[readme.index("### A client") :]
+def test_the_documented_client_runs(ros: Ros, daemon: Any, start_node: Any, tmp_path: Path) -> None:
+    """docs/ros2.md's 10-line client, as printed there, gets an answer from the node."""
+    page = (ROOT / "docs" / "ros2.md").read_text()
+    section = page[page.index("## A client") :]
     code = section[section.index("```python\n") + len("```python\n") :]
     code = code[: code.index("```")]
     with daemon.client() as client:

@@ -76,7 +76,7 @@ pub struct Limits {
     pub upload_idle_timeout_s: u64,
 }
 
-/// `[scheduling]`: how cheap requests get a core while searches run (README,
+/// `[scheduling]`: how cheap requests get a core while searches run (docs/daemon.md,
 /// "Priorities"; `bench/RESULTS.md`, "Why the scheduling defaults").
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

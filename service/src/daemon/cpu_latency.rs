@@ -56,7 +56,7 @@ impl CpuLatency {
                 me.write(Self::NONE_US);
             }
             Err(e) => info!(
-                "cannot open {} ({e}): idle cores wake as the kernel decides (tens of µs more for a request after a pause); it needs root (see README, daemon priorities)",
+                "cannot open {} ({e}): idle cores wake as the kernel decides (tens of µs more for a request after a pause); it needs root (see docs/daemon.md, Priorities)",
                 device.display()
             ),
         }

@@ -66,12 +66,12 @@ impl IpcPriority {
                 let how = "it needs CAP_SYS_NICE (`setcap cap_sys_nice+ep dyfosd`) or an RLIMIT_RTPRIO";
                 if set_slice(IPC_SLICE).is_ok() && slice() == Some(IPC_SLICE) {
                     warn!(
-                        "IPC thread: real-time priority {priority} refused ({e}): {how} of at least {priority} (`ulimit -r {priority}`); it runs at normal priority with a {IPC_SLICE:?} time slice instead, so a request still preempts a running search, though less surely (see README, daemon priorities)"
+                        "IPC thread: real-time priority {priority} refused ({e}): {how} of at least {priority} (`ulimit -r {priority}`); it runs at normal priority with a {IPC_SLICE:?} time slice instead, so a request still preempts a running search, though less surely (see docs/daemon.md, Priorities)"
                     );
                     return (p, IpcScheduling::ShortSlice);
                 }
                 warn!(
-                    "IPC thread: real-time priority {priority} refused ({e}): {how} of at least {priority} (`ulimit -r {priority}`); this kernel takes no time slice either (Linux 6.12 and later do), so the search workers are niced instead (see README, daemon priorities)"
+                    "IPC thread: real-time priority {priority} refused ({e}): {how} of at least {priority} (`ulimit -r {priority}`); this kernel takes no time slice either (Linux 6.12 and later do), so the search workers are niced instead (see docs/daemon.md, Priorities)"
                 );
                 (p, IpcScheduling::Refused)
             }

@@ -502,7 +502,7 @@ class Client:
             bounds: ``[x_min, y_min, x_max, y_max]`` of the map, metres.
             sun: ``(elevation, azimuth)`` in radians.
             origin: where the minimum corner of OctoMap's cell (0, 0, 0) lies in the
-                map frame (default: OctoMap's frame is the map frame); see the README.
+                map frame (default: OctoMap's frame is the map frame); see docs/octomap.md.
 
         Raises:
             InvalidRequestError: not a readable ``.bt`` (``invalid_delta``, naming what

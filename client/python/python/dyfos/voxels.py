@@ -16,7 +16,7 @@ one the daemon has, and send the next as the cells that changed::
 
 Cells follow SPEC §1: OctoMap's cell (i, j, k) is the closed cube of side ``resolution``
 whose minimum corner is ``origin + resolution·(i, j, k)`` in the map frame (see the
-README's OctoMap section for choosing ``origin``).
+docs/octomap.md for choosing ``origin``).
 """
 
 from __future__ import annotations
