@@ -347,12 +347,12 @@ impl Daemon {
     }
 }
 
+/// The recorder, if recording, and its writer thread, if it writes.
+type RecorderAndThread = (Option<Arc<TrafficRecorder>>, Option<JoinHandle<()>>);
+
 /// Starts recording if the configuration says so: the file's head holds the
 /// configuration and every map of `maps`.
-fn start_recorder(
-    config: &DaemonConfig,
-    maps: &Maps,
-) -> Result<(Option<Arc<TrafficRecorder>>, Option<JoinHandle<()>>), DaemonCreateError> {
+fn start_recorder(config: &DaemonConfig, maps: &Maps) -> Result<RecorderAndThread, DaemonCreateError> {
     let Some(rc) = config.recording.record_config() else { return Ok((None, None)) };
     let (recorder, thread) = TrafficRecorder::start(&rc, config.to_json(pool::workers(config)), maps.arcs().collect())
         .map_err(|source| DaemonCreateError::Record { path: rc.path.clone(), source })?;

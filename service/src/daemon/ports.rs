@@ -98,8 +98,10 @@ impl Ports {
             .request_response(services.stats().map_err(named)?)
             .open_or_create()
             .map_err(|e| incompatible(&names.stats, &e))?;
-        let wake_service =
-            limits.event(services.wake().map_err(named)?).open_or_create().map_err(|e| incompatible(&names.wake, &e))?;
+        let wake_service = limits
+            .event(services.wake().map_err(named)?)
+            .open_or_create()
+            .map_err(|e| incompatible(&names.wake, &e))?;
         let reply_service = limits
             .event(services.reply().map_err(named)?)
             .open_or_create()

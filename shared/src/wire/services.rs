@@ -97,16 +97,12 @@ impl<'a, S: Service> Services<'a, S> {
     }
 
     fn builder(&self, name: &str) -> Result<iceoryx2::service::builder::Builder<S>, BadServiceName> {
-        let service = ServiceName::new(name).map_err(|source| BadServiceName { name: name.to_string(), source })?;
-        Ok(self.node.service_builder(&service))
+        builder(self.node, name)
     }
 
     /// `<prefix>rendezvous`.
     pub fn rendezvous(&self) -> Result<RendezvousBuilder<S>, BadServiceName> {
-        Ok(self
-            .builder(&self.names.rendezvous)?
-            .request_response::<[WireDelta], RendezvousReply>()
-            .request_user_header::<RendezvousRequestHeader>())
+        rendezvous_named(self.node, &self.names.rendezvous)
     }
 
     /// `<prefix>map`.
@@ -132,6 +128,19 @@ impl<'a, S: Service> Services<'a, S> {
     pub fn reply(&self) -> Result<event::Builder<S>, BadServiceName> {
         Ok(self.builder(&self.names.reply)?.event())
     }
+}
+
+/// A service with the rendezvous service's types under any `name` (the benchmark's
+/// floor: iceoryx2 alone, without a daemon behind it).
+pub fn rendezvous_named<S: Service>(node: &Node<S>, name: &str) -> Result<RendezvousBuilder<S>, BadServiceName> {
+    Ok(builder(node, name)?
+        .request_response::<[WireDelta], RendezvousReply>()
+        .request_user_header::<RendezvousRequestHeader>())
+}
+
+fn builder<S: Service>(node: &Node<S>, name: &str) -> Result<iceoryx2::service::builder::Builder<S>, BadServiceName> {
+    let service = ServiceName::new(name).map_err(|source| BadServiceName { name: name.to_string(), source })?;
+    Ok(node.service_builder(&service))
 }
 
 /// The limits the daemon creates its services with (`docs/wire.md`): one server,
@@ -178,10 +187,7 @@ impl ServiceLimits {
     /// An event service with these limits: a notifier and a listener per client,
     /// and the daemon's.
     pub fn event<S: Service>(&self, builder: event::Builder<S>) -> event::Builder<S> {
-        builder
-            .max_nodes(self.max_nodes())
-            .max_notifiers(self.max_clients + 1)
-            .max_listeners(self.max_clients + 1)
+        builder.max_nodes(self.max_nodes()).max_notifiers(self.max_clients + 1).max_listeners(self.max_clients + 1)
     }
 }
 

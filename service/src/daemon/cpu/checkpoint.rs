@@ -145,11 +145,7 @@ impl Checkpoint for WorkerCheckpoint<'_> {
         let held = Instant::now();
         // An abandoned search goes on at once, to see the flag and stop.
         while !q.may_go_on() && !watch.abandoned() {
-            q = self
-                .pool
-                .resume
-                .wait_timeout(q, Duration::from_millis(10))
-                .map_or_else(|p| p.into_inner().0, |r| r.0);
+            q = self.pool.resume.wait_timeout(q, Duration::from_millis(10)).map_or_else(|p| p.into_inner().0, |r| r.0);
         }
         q.go_on(self.worker);
         drop(q);

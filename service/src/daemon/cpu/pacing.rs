@@ -1,9 +1,9 @@
 //! The IPC thread's pace: when it runs real-time, how long it polls before it
 //! sleeps, and when idle cores are asked to poll.
 
+use super::FALLBACK_WORKER_NICE;
 use super::cpu_latency::CpuLatency;
 use super::sched::{IpcPriority, IpcScheduling};
-use super::FALLBACK_WORKER_NICE;
 use crate::daemon::Scheduling;
 use dyfos_process::idle::IdleCores;
 use std::time::{Duration, Instant};

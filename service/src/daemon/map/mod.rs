@@ -100,8 +100,7 @@ fn handle(maps: &mut Maps, request: MapRequest) -> Result<Reply, Rejection> {
             sun,
             deltas,
         } => {
-            let chunk =
-                Chunk { upload_id, chunk_index, chunk_count, replace, expected_version, bounds, sun, deltas };
+            let chunk = Chunk { upload_id, chunk_index, chunk_count, replace, expected_version, bounds, sun, deltas };
             let mut reply = ok(map, maps.upload(map, chunk)?);
             reply.header.chunk_index = chunk_index;
             reply.header.chunk_count = chunk_count;
@@ -211,4 +210,3 @@ fn request_json(request: &MapRequest) -> (&'static str, serde_json::Value) {
         MapRequest::List { .. } => ("list", json!({})),
     }
 }
-

@@ -153,7 +153,10 @@ impl Maps {
         let world = self.get(map).ok_or_else(|| unknown_map(map))?;
         check_version(map, &world, expected_version)?;
         self.store.remove(map).map_err(|e| {
-            Rejection::new(Status::StorageFailed, format!("could not remove map {map}'s file ({e}); the map is unchanged"))
+            Rejection::new(
+                Status::StorageFailed,
+                format!("could not remove map {map}'s file ({e}); the map is unchanged"),
+            )
         })?;
         self.maps.remove(&map);
         self.generations.remove(&map);

@@ -367,10 +367,7 @@ mod tests {
     #[test]
     fn an_upload_past_a_maps_limits_is_abandoned() {
         let mut uploads = Uploads::new(Duration::from_secs(60));
-        let full = |index| Chunk {
-            deltas: (0..=MAX_OBSTACLES as u32 / 2).map(pillar).collect(),
-            ..chunk(7, index, 3)
-        };
+        let full = |index| Chunk { deltas: (0..=MAX_OBSTACLES as u32 / 2).map(pillar).collect(), ..chunk(7, index, 3) };
         uploads.take(1, full(0)).unwrap();
         assert_eq!(status(uploads.take(1, full(1))), Status::OverCapacity);
         assert_eq!(status(uploads.take(1, chunk(7, 2, 3))), Status::ChunkIncomplete);

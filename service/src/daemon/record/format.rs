@@ -97,7 +97,6 @@ pub fn json_schema(topic: &str) -> serde_json::Value {
     })
 }
 
-
 /// Every SPEC §11 parameter by its scenario name (what
 /// [`dyfos_shared::scenario::params_from_json`] reads back, bit for bit).
 pub fn params_to_json(p: &Params) -> serde_json::Value {
@@ -111,7 +110,6 @@ pub fn params_to_json(p: &Params) -> serde_json::Value {
         "model": match p.model { ModelKind::Paper => "paper", ModelKind::Anisotropic => "anisotropic", ModelKind::Learned => "learned" },
     })
 }
-
 
 /// A rendezvous request as recorded: the decoded, validated request.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -396,7 +394,6 @@ pub struct MapChange {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub state: Option<MapState>,
 }
-
 
 #[cfg(test)]
 mod tests {

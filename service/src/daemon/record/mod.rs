@@ -65,7 +65,6 @@ pub(crate) enum Record {
     Close,
 }
 
-
 /// How the recorder writes: the `[recording]` keys of
 /// [`DaemonConfig`](super::DaemonConfig), and its queue.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -127,7 +126,6 @@ pub fn unix_ns(t: SystemTime) -> u64 {
 pub(crate) fn unix_ns_of(since: Instant) -> u64 {
     unix_ns(SystemTime::now().checked_sub(since.elapsed()).unwrap_or(UNIX_EPOCH))
 }
-
 
 #[cfg(test)]
 mod tests {

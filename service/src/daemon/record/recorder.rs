@@ -2,7 +2,7 @@
 //! the IPC thread and the workers never wait for, and that thread's loop.
 
 use super::writer::{OpenError, Writer, error_text};
-use super::{RecordConfig, Record};
+use super::{Record, RecordConfig};
 use dyfos_shared::wire::map::MapId;
 use dyfos_shared::world::World;
 use std::collections::BTreeMap;
@@ -95,7 +95,6 @@ impl TrafficRecorder {
     }
 }
 
-
 impl Writer {
     /// Writes what arrives until `Close` (or every sender is gone), then finishes
     /// the file.
@@ -168,9 +167,9 @@ impl Writer {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use super::super::ChangeCause;
     use super::super::topics;
+    use super::*;
 
     #[test]
     fn dropped_records_are_counted_and_recorded() {

@@ -23,7 +23,6 @@ fn partial_path(path: &Path) -> PathBuf {
     PathBuf::from(name)
 }
 
-
 /// The file, counting its bytes where the writer thread can read them while the
 /// MCAP writer owns the file.
 pub(super) struct Counted {

@@ -7,9 +7,9 @@ mod watch;
 mod worker;
 
 pub(crate) use queue::Queue;
+pub(crate) use watch::{Connected, Watch};
 pub use worker::answer_query;
 pub(crate) use worker::worker;
-pub(crate) use watch::{Connected, Watch};
 
 use super::pool::{Pool, lock};
 use super::ports::{RendezvousActive, Replies};

@@ -129,7 +129,8 @@ fn run(pool: &Pool, replies: &Replies, index: usize, job: Job, checkpoint: Optio
         }
     }
     debug!(request_id, status = reply.status, micros, map = request.map, version = world.version(), "query answered");
-    let recorded = pool.recorder.is_some().then(|| Recorded { received, mode: Mode::Solve, request: Box::new(request) });
+    let recorded =
+        pool.recorder.is_some().then(|| Recorded { received, mode: Mode::Solve, request: Box::new(request) });
     deliver(pool, replies, &active, reply_to, reply, recorded);
 }
 
