@@ -45,6 +45,7 @@ use dyfos_shared::scenario::Scenario;
 use dyfos_shared::sdsmm::NoiseModel;
 use dyfos_shared::wire::map::{MapId, WireDelta};
 use dyfos_shared::wire::rendezvous::{Mode, RendezvousReply, RendezvousRequest, RendezvousRequestHeader};
+use dyfos_shared::wire::services::{self, Services};
 use iceoryx2::prelude::*;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -395,9 +396,7 @@ type FloorService = ipc::Service;
 
 /// The iceoryx2 configuration of a domain (iceoryx2's file prefix).
 fn domain_config(domain: &str) -> Result<iceoryx2::config::Config, String> {
-    let mut config = iceoryx2::config::Config::default();
-    config.global.prefix = FileName::new(domain.as_bytes()).map_err(|e| format!("domain `{domain}`: {e:?}"))?;
-    Ok(config)
+    services::iceoryx_config(Some(domain)).map_err(|e| e.to_string())
 }
 
 fn node(domain: &str) -> Result<Node<FloorService>, String> {
@@ -414,11 +413,8 @@ fn node(domain: &str) -> Result<Node<FloorService>, String> {
 /// number of requests answered.
 pub fn serve_floor(domain: &str, service: &str, max_clients: usize, stop: &AtomicBool) -> Result<u64, String> {
     let node = node(domain)?;
-    let name = ServiceName::new(service).map_err(|e| format!("service `{service}`: {e:?}"))?;
-    let server = node
-        .service_builder(&name)
-        .request_response::<[WireDelta], RendezvousReply>()
-        .request_user_header::<RendezvousRequestHeader>()
+    let server = services::rendezvous_named(&node, service)
+        .map_err(|e| e.to_string())?
         .enable_fire_and_forget_requests(false)
         .max_clients(max_clients.max(1))
         .max_nodes(max_clients.max(1) + 1)
@@ -462,15 +458,10 @@ impl FloorClient {
     /// Opens the floor service, waiting up to `timeout` for the server.
     pub fn open(domain: &str, service: &str, request: &RendezvousRequest, timeout: Duration) -> Result<Self, String> {
         let node = node(domain)?;
-        let name = ServiceName::new(service).map_err(|e| format!("service `{service}`: {e:?}"))?;
+        let builder = services::rendezvous_named(&node, service).map_err(|e| e.to_string())?;
         let start = Instant::now();
         let service = loop {
-            match node
-                .service_builder(&name)
-                .request_response::<[WireDelta], RendezvousReply>()
-                .request_user_header::<RendezvousRequestHeader>()
-                .open()
-            {
+            match builder.clone().open() {
                 Ok(s) => break s,
                 Err(e) if start.elapsed() > timeout => return Err(format!("open {service}: {e:?}")),
                 Err(_) => std::thread::sleep(Duration::from_millis(5)),
@@ -525,19 +516,18 @@ impl GreedyClient {
     pub fn open(domain: &str, prefix: &str) -> Result<Self, String> {
         let node = node(domain)?;
         let names = dyfos_shared::wire::ServiceNames::new(prefix).map_err(|e| e.to_string())?;
-        let name = |s: &str| ServiceName::new(s).map_err(|e| format!("service `{s}`: {e:?}"));
-        let port = node
-            .service_builder(&name(&names.rendezvous)?)
-            .request_response::<[WireDelta], RendezvousReply>()
-            .request_user_header::<RendezvousRequestHeader>()
+        let services = Services::new(&node, &names);
+        let port = services
+            .rendezvous()
+            .map_err(|e| e.to_string())?
             .open()
             .map_err(|e| format!("open {}: {e:?}", names.rendezvous))?
             .client_builder()
             .create()
             .map_err(|e| format!("greedy client: {e:?}"))?;
-        let wake = node
-            .service_builder(&name(&names.wake)?)
-            .event()
+        let wake = services
+            .wake()
+            .map_err(|e| e.to_string())?
             .open()
             .map_err(|e| format!("open {}: {e:?}", names.wake))?
             .notifier_builder()

@@ -23,7 +23,7 @@ fn latency_command_smoke_run() {
         // A second daemon with another polling window, for the before/after table.
         .arg("--compare-daemon-arg=--set=scheduling.poll_us=50")
         // Clients with a shorter poll window than the library default.
-        .args(["--client-spin-us", "100"])
+        .args(["--client-poll-us", "100"])
         // The contention runs, short: one hog, 0.2 s idle.
         .args(["--hogs", "1", "--idle-seconds", "0.2"])
         .arg("--out")

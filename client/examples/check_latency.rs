@@ -17,12 +17,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let arg = |i: usize| args.get(i).filter(|a| !a.is_empty());
     let count: usize = arg(2).map_or(Ok(2000), |a| a.parse())?;
-    let spin_us: u64 = arg(3).map_or(Ok(200), |a| a.parse())?;
+    let poll_us: u64 = arg(3).map_or(Ok(200), |a| a.parse())?;
     let gap_us: u64 = arg(4).map_or(Ok(0), |a| a.parse())?;
     let config = ClientConfig {
         prefix: arg(0).cloned().unwrap_or_else(|| dyfos_client::DEFAULT_PREFIX.to_string()),
         domain: arg(1).cloned(),
-        spin: Duration::from_micros(spin_us),
+        poll: Duration::from_micros(poll_us),
         ..ClientConfig::default()
     };
     let mut client = Client::connect(&config)?;
@@ -51,7 +51,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     micros.sort_by(f64::total_cmp);
     let at = |q: f64| micros[((micros.len() - 1) as f64 * q).round() as usize];
     println!(
-        "{{\"count\": {count}, \"client_spin_us\": {spin_us}, \"gap_us\": {gap_us}, \"p50_us\": {:.1}, \"p90_us\": {:.1}, \"p99_us\": {:.1}, \"max_us\": {:.1}}}",
+        "{{\"count\": {count}, \"client_poll_us\": {poll_us}, \"gap_us\": {gap_us}, \"p50_us\": {:.1}, \"p90_us\": {:.1}, \"p99_us\": {:.1}, \"max_us\": {:.1}}}",
         at(0.5),
         at(0.9),
         at(0.99),

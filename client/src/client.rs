@@ -1,7 +1,6 @@
 //! [`Client`]: the connection to one `dyfosd` and its typed requests.
 
-use crate::Ipc;
-use crate::error::{CallError, ClientOpenError, MapRequestError, RendezvousError, StatsRequestError};
+use crate::error::{CallError, ClientOpenError, IpcFailure, MapRequestError, RendezvousError, StatsRequestError};
 use dyfos_process::idle::IdleCores;
 use dyfos_shared::answer::Answer;
 use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS, MAX_MAPS};
@@ -11,6 +10,7 @@ use dyfos_shared::wire::map::{
 use dyfos_shared::wire::rendezvous::{
     Mode, RendezvousCheck, RendezvousReply, RendezvousRequest, RendezvousRequestHeader,
 };
+use dyfos_shared::wire::services::{self, BadServiceName, InvalidDomain, Ipc, Services};
 use dyfos_shared::wire::stats::{DaemonStats, StatsReply, StatsRequest};
 use dyfos_shared::wire::{DEFAULT_PREFIX, Rejection, ServiceNames, Status, split_u128};
 use dyfos_shared::world::{Bounds, MapDelta, Sun, World};
@@ -27,11 +27,11 @@ type MapPort = ClientPort<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapRe
 type StatsPort = ClientPort<Ipc, StatsRequest, (), StatsReply, ()>;
 
 /// How long a client polls for a reply without yielding its core, at most, before
-/// it polls yielding (`ClientConfig::spin`): long enough for the daemon to answer a
+/// it polls yielding (`ClientConfig::poll`): long enough for the daemon to answer a
 /// check-mode, `stats` or map request (its IPC thread wakes at real-time priority),
 /// short enough to cost nothing next to a search (`bench/RESULTS.md`, "Why the
 /// scheduling defaults").
-pub(crate) const HOT_SPIN: Duration = Duration::from_micros(50);
+pub(crate) const HOT_POLL: Duration = Duration::from_micros(50);
 
 /// How to reach the daemon.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -47,7 +47,7 @@ pub struct ClientConfig {
     /// covers a typical `dyfos` query; longer windows cut a lone client's latency a
     /// little more but cost throughput when more clients than cores poll at once
     /// (`bench/RESULTS.md`, "Why the scheduling defaults").
-    pub spin: Duration,
+    pub poll: Duration,
     /// iceoryx2 file prefix (its `global.prefix`, default `iox2_`): processes see each
     /// other only within one domain. `None` keeps iceoryx2's default. The daemon's
     /// `--domain`.
@@ -59,7 +59,7 @@ impl Default for ClientConfig {
         ClientConfig {
             prefix: DEFAULT_PREFIX.to_string(),
             connect_timeout: Duration::from_secs(2),
-            spin: Duration::from_millis(1),
+            poll: Duration::from_millis(1),
             domain: None,
         }
     }
@@ -68,23 +68,15 @@ impl Default for ClientConfig {
 /// The iceoryx2 configuration of a domain (`None`: iceoryx2's default), as the
 /// client opens its ports; the mission processes open their topics with the same.
 pub fn iceoryx_config(domain: Option<&str>) -> Result<iceoryx2::config::Config, ClientOpenError> {
-    let mut config = iceoryx2::config::Config::default();
-    if let Some(d) = domain {
-        let valid = !d.is_empty() && d.len() <= 32 && d.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_');
-        config.global.prefix = match FileName::new(d.as_bytes()) {
-            Ok(name) if valid => name,
-            _ => return Err(ClientOpenError::InvalidDomain(d.to_string())),
-        };
-    }
-    Ok(config)
+    services::iceoryx_config(domain).map_err(|InvalidDomain(d)| ClientOpenError::InvalidDomain(d))
 }
 
-fn ipc(e: impl std::fmt::Debug) -> CallError {
-    CallError::Ipc(format!("{e:?}"))
+fn ipc(e: impl std::error::Error + Send + Sync + 'static) -> CallError {
+    CallError::Ipc(IpcFailure::new(e))
 }
 
-fn open_ipc(e: impl std::fmt::Debug) -> ClientOpenError {
-    ClientOpenError::Ipc(format!("{e:?}"))
+fn open_ipc(e: impl std::error::Error + Send + Sync + 'static) -> ClientOpenError {
+    ClientOpenError::Ipc(IpcFailure::new(e))
 }
 
 /// The ports of one connection. Dropping it closes them.
@@ -115,7 +107,8 @@ impl Connection {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<Ipc>()
             .map_err(open_ipc)?;
-        let service_name = |s: &str| ServiceName::new(s).map_err(open_ipc);
+        let services = Services::new(&node, names);
+        let named = |e: BadServiceName| ClientOpenError::Ipc(IpcFailure::on(&e.name, e.source));
         let incompatible = |service: &str, e: RequestResponseOpenError| match e {
             RequestResponseOpenError::DoesNotExist => None,
             RequestResponseOpenError::IncompatibleRequestOrResponseType
@@ -123,11 +116,11 @@ impl Connection {
             | RequestResponseOpenError::IncompatibleAttributes => {
                 Some(ClientOpenError::Incompatible { service: service.to_string(), reason: format!("{e:?}") })
             }
-            other => Some(ClientOpenError::Ipc(format!("{service}: {other:?}"))),
+            other => Some(ClientOpenError::Ipc(IpcFailure::on(service, other))),
         };
         macro_rules! open_rr {
             ($name:expr, $build:expr) => {
-                match $build.open() {
+                match $build.map_err(named)?.open() {
                     Ok(s) => s,
                     Err(e) => match incompatible($name, e) {
                         None => return Ok(Opened::Missing),
@@ -136,27 +129,11 @@ impl Connection {
                 }
             };
         }
-        let rendezvous = open_rr!(
-            &names.rendezvous,
-            node.service_builder(&service_name(&names.rendezvous)?)
-                .request_response::<[WireDelta], RendezvousReply>()
-                .request_user_header::<RendezvousRequestHeader>()
-        );
-        let map = open_rr!(
-            &names.map,
-            node.service_builder(&service_name(&names.map)?)
-                .request_response::<[WireDelta], [WireDelta]>()
-                .request_user_header::<MapRequestHeader>()
-                .response_user_header::<MapReplyHeader>()
-        );
-        let stats = open_rr!(
-            &names.stats,
-            node.service_builder(&service_name(&names.stats)?).request_response::<StatsRequest, StatsReply>()
-        );
-        let (Ok(wake), Ok(reply)) = (
-            node.service_builder(&service_name(&names.wake)?).event().open(),
-            node.service_builder(&service_name(&names.reply)?).event().open(),
-        ) else {
+        let rendezvous = open_rr!(&names.rendezvous, services.rendezvous());
+        let map = open_rr!(&names.map, services.map());
+        let stats = open_rr!(&names.stats, services.stats());
+        let (Ok(wake), Ok(reply)) = (services.wake().map_err(named)?.open(), services.reply().map_err(named)?.open())
+        else {
             return Ok(Opened::Missing);
         };
         use iceoryx2::service::port_factory::PortFactory as _;
@@ -193,12 +170,12 @@ impl Connection {
         })))
     }
 
-    /// Waits for `receive` to yield a reply: busy-polls for `spin`, then sleeps on
+    /// Waits for `receive` to yield a reply: busy-polls for `poll`, then sleeps on
     /// the reply event. Notices a daemon that died (its ports go away when the dead
     /// node is cleaned up, which this loop triggers) and the timeout.
     fn await_reply<T>(
         &self,
-        spin: Duration,
+        poll: Duration,
         timeout: Duration,
         interrupt: &mut Interrupt,
         mut receive: impl FnMut() -> Result<Option<T>, CallError>,
@@ -216,14 +193,14 @@ impl Connection {
             if elapsed >= timeout {
                 return Err(CallError::Timeout(timeout));
             }
-            if elapsed < spin.min(HOT_SPIN) {
+            if elapsed < poll.min(HOT_POLL) {
                 // The first microseconds, poll without yielding: a cheap request's
                 // reply comes in that time, and a yield on a busy core hands it to
                 // another thread for a whole time slice (milliseconds) first.
                 std::hint::spin_loop();
                 continue;
             }
-            if elapsed < spin && !self.idle.busy() {
+            if elapsed < poll && !self.idle.busy() {
                 // Yield rather than burn the core: the daemon may need this very core
                 // to answer. Only while a core is idle: when every core is taken
                 // (the workers search, other clients wait), a thread that yields
@@ -410,7 +387,7 @@ impl Client {
                 });
             }
             conn.await_reply(
-                config.spin,
+                config.poll,
                 timeout,
                 interrupt,
                 || Ok(pending.receive().map_err(ipc)?.map(|r| *r.payload()).filter(|r| r.request_id == id)),
@@ -467,7 +444,7 @@ impl Client {
                 });
             }
             conn.await_reply(
-                config.spin,
+                config.poll,
                 timeout,
                 interrupt,
                 || {
@@ -686,7 +663,7 @@ impl Client {
                 });
             }
             conn.await_reply(
-                config.spin,
+                config.poll,
                 timeout,
                 interrupt,
                 || Ok(pending.receive().map_err(ipc)?.map(|r| *r.payload()).filter(|r| r.request_id == id)),

@@ -1,7 +1,38 @@
 //! The client's errors: one enum per operation, each saying what to do.
 
 use dyfos_shared::wire::{PrefixError, Rejection, Status};
+use std::sync::Arc;
 use std::time::Duration;
+
+/// An iceoryx2 failure: iceoryx2's error, kept as the [source](std::error::Error::source),
+/// and its text.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("{text}")]
+pub struct IpcFailure {
+    text: String,
+    #[source]
+    source: Arc<dyn std::error::Error + Send + Sync>,
+}
+
+impl IpcFailure {
+    /// iceoryx2 failed with `e`.
+    pub(crate) fn new(e: impl std::error::Error + Send + Sync + 'static) -> Self {
+        IpcFailure { text: format!("{e:?}"), source: Arc::new(e) }
+    }
+
+    /// iceoryx2 failed with `e` on `service`.
+    pub(crate) fn on(service: &str, e: impl std::error::Error + Send + Sync + 'static) -> Self {
+        IpcFailure { text: format!("{service}: {e:?}"), source: Arc::new(e) }
+    }
+}
+
+/// Two failures are equal when they say the same (iceoryx2's errors are compared
+/// by their text).
+impl PartialEq for IpcFailure {
+    fn eq(&self, other: &Self) -> bool {
+        self.text == other.text
+    }
+}
 
 /// Why [`crate::Client::connect`] failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -40,7 +71,7 @@ pub enum ClientOpenError {
     },
     /// Any other iceoryx2 failure.
     #[error("iceoryx2: {0}")]
-    Ipc(String),
+    Ipc(#[source] IpcFailure),
 }
 
 /// "iceoryx2 domain `d`", or the default domain, for messages.
@@ -62,7 +93,7 @@ pub(crate) enum CallError {
     Timeout(Duration),
     Rejected(Rejection),
     Local(Rejection),
-    Ipc(String),
+    Ipc(IpcFailure),
     Interrupted,
 }
 
@@ -108,7 +139,7 @@ macro_rules! request_error {
             Invalid(Rejection),
             /// Any other iceoryx2 failure.
             #[error("iceoryx2: {0}")]
-            Ipc(String),
+            Ipc(#[source] IpcFailure),
             /// The caller's interrupt check ended the wait
             /// ([`Client::set_interrupt_check`](crate::Client::set_interrupt_check)):
             /// no answer; a running search is abandoned.

@@ -20,7 +20,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
-//! Waiting for a reply first busy-polls for [`ClientConfig::spin`] (a reply to a
+//! Waiting for a reply first busy-polls for [`ClientConfig::poll`] (a reply to a
 //! cheap request arrives within microseconds), then sleeps on an iceoryx2 event the
 //! daemon sends with the reply, so a long query costs the client no CPU.
 #![warn(missing_docs)]
@@ -33,11 +33,12 @@ pub use dyfos_shared::wire::map::MapInfo;
 pub use dyfos_shared::wire::rendezvous::{RendezvousCheck, RendezvousRequest};
 pub use dyfos_shared::wire::stats::DaemonStats;
 pub use dyfos_shared::wire::{DEFAULT_PREFIX, Rejection, Status};
-pub use error::{ClientOpenError, MapRequestError, RendezvousError, StatsRequestError};
+pub use error::{ClientOpenError, IpcFailure, MapRequestError, RendezvousError, StatsRequestError};
 
 /// The iceoryx2 service variant of the client's ports: the thread-safe one, so a
-/// [`Client`] can move between threads. It shares memory with `ipc::Service` peers.
-pub type Ipc = iceoryx2::prelude::ipc_threadsafe::Service;
+/// [`Client`] can move between threads (defined once, with the services, in
+/// `dyfos_shared::wire::services`).
+pub use dyfos_shared::wire::services::Ipc;
 
 /// Client, requests, answers, map deltas, errors and `nalgebra`, in one `use`.
 pub mod prelude {

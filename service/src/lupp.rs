@@ -33,7 +33,7 @@ use std::f64::consts::FRAC_1_SQRT_2;
 /// The constraint that rejected a candidate (SPEC §5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Rejection {
+pub enum Violation {
     /// Viewer outside the map bounds or the altitude limits.
     Workspace,
     /// A collision ray from the viewer touches an obstacle.
@@ -42,13 +42,13 @@ pub enum Rejection {
     Occlusion,
 }
 
-impl Rejection {
+impl Violation {
     /// The name used in reports: "workspace", "collision", "occlusion".
     pub fn name(self) -> &'static str {
         match self {
-            Rejection::Workspace => "workspace",
-            Rejection::Collision => "collision",
-            Rejection::Occlusion => "occlusion",
+            Violation::Workspace => "workspace",
+            Violation::Collision => "collision",
+            Violation::Occlusion => "occlusion",
         }
     }
 }
@@ -62,7 +62,7 @@ pub enum Evaluation {
         cost: f64,
     },
     /// Rejected by the first failing constraint.
-    Rejected(Rejection),
+    Rejected(Violation),
 }
 
 impl Evaluation {
@@ -81,9 +81,9 @@ impl Evaluation {
         stats.total += 1;
         match self {
             Evaluation::Feasible { .. } => {}
-            Evaluation::Rejected(Rejection::Workspace) => stats.workspace += 1,
-            Evaluation::Rejected(Rejection::Collision) => stats.collision += 1,
-            Evaluation::Rejected(Rejection::Occlusion) => stats.occlusion += 1,
+            Evaluation::Rejected(Violation::Workspace) => stats.workspace += 1,
+            Evaluation::Rejected(Violation::Collision) => stats.collision += 1,
+            Evaluation::Rejected(Violation::Occlusion) => stats.occlusion += 1,
         }
     }
 }
@@ -211,13 +211,13 @@ impl<'a> Lupp<'a> {
     }
 
     #[inline]
-    fn first_violation(&self, pose: &SensorPose) -> Option<Rejection> {
+    fn first_violation(&self, pose: &SensorPose) -> Option<Violation> {
         let p_v = &pose.viewer_position;
         if !(self.world.bounds().contains(p_v.x, p_v.y) && self.params.z_min <= p_v.z && p_v.z <= self.params.z_max) {
-            return Some(Rejection::Workspace);
+            return Some(Violation::Workspace);
         }
         if self.world.any_contact(&self.collision_rays(pose)) {
-            return Some(Rejection::Collision);
+            return Some(Violation::Collision);
         }
         let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
         for chunk in self.targets.chunks(SIGHT_BATCH) {
@@ -229,7 +229,7 @@ impl<'a> Lupp<'a> {
                 }
             }
             if self.world.any_contact(&batch[..n]) {
-                return Some(Rejection::Occlusion);
+                return Some(Violation::Occlusion);
             }
         }
         None
@@ -253,8 +253,8 @@ impl<'a> Lupp<'a> {
         let pose = self.rig.pose(&self.targets[0], x);
         let evaluation = self.evaluate(x);
         let blockers = match evaluation {
-            Evaluation::Rejected(Rejection::Collision) => self.blockers(&self.collision_rays(&pose)),
-            Evaluation::Rejected(Rejection::Occlusion) => {
+            Evaluation::Rejected(Violation::Collision) => self.blockers(&self.collision_rays(&pose)),
+            Evaluation::Rejected(Violation::Occlusion) => {
                 let sights: Vec<Segment> =
                     self.targets.iter().filter_map(|q| Segment::sight_line(&pose.position, q, 1e-6)).collect();
                 self.blockers(&sights)

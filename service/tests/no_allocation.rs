@@ -7,7 +7,7 @@
 //! so tests running beside this one on other threads do not disturb the counts.
 
 use allocation_counter::measure;
-use dyfos_service::lupp::{Evaluation, Lupp, Rejection};
+use dyfos_service::lupp::{Evaluation, Lupp, Violation};
 use dyfos_service::search::{Brute, DifferentialEvolution, Search, SearchControl};
 use dyfos_shared::prelude::*;
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
@@ -80,9 +80,9 @@ fn lupp_evaluate_allocates_nothing() {
                 for x in &candidates {
                     let slot = match lupp.evaluate(x) {
                         Evaluation::Feasible { .. } => 0,
-                        Evaluation::Rejected(Rejection::Workspace) => 1,
-                        Evaluation::Rejected(Rejection::Collision) => 2,
-                        Evaluation::Rejected(Rejection::Occlusion) => 3,
+                        Evaluation::Rejected(Violation::Workspace) => 1,
+                        Evaluation::Rejected(Violation::Collision) => 2,
+                        Evaluation::Rejected(Violation::Occlusion) => 3,
                     };
                     verdicts[slot] += 1;
                 }

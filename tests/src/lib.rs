@@ -368,20 +368,19 @@ pub type PendingRendezvous = iceoryx2::pending_response::PendingResponse<
 impl RawClient {
     /// Opens the sandbox daemon's services.
     pub fn open(sandbox: &Sandbox) -> RawClient {
+        use dyfos_shared::wire::services;
         use iceoryx2::prelude::*;
-        let mut config = iceoryx2::config::Config::default();
-        config.global.prefix = FileName::new(sandbox.domain.as_bytes()).expect("domain");
+        let config = services::iceoryx_config(Some(&sandbox.domain)).expect("domain");
         let node = NodeBuilder::new()
             .config(&config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .expect("node");
         let names = dyfos_shared::wire::ServiceNames::new(&sandbox.prefix).expect("prefix");
-        let name = |s: &str| ServiceName::new(s).expect("service name");
-        let rendezvous = node
-            .service_builder(&name(&names.rendezvous))
-            .request_response::<[WireDelta], RendezvousReply>()
-            .request_user_header::<RendezvousRequestHeader>()
+        let services = services::Services::new(&node, &names);
+        let rendezvous = services
+            .rendezvous()
+            .expect("service name")
             .open()
             .expect("open rendezvous")
             .client_builder()
@@ -389,11 +388,9 @@ impl RawClient {
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .expect("rendezvous client");
-        let map = node
-            .service_builder(&name(&names.map))
-            .request_response::<[WireDelta], [WireDelta]>()
-            .request_user_header::<MapRequestHeader>()
-            .response_user_header::<MapReplyHeader>()
+        let map = services
+            .map()
+            .expect("service name")
             .open()
             .expect("open map")
             .client_builder()
@@ -401,9 +398,9 @@ impl RawClient {
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .expect("map client");
-        let wake = node
-            .service_builder(&name(&names.wake))
-            .event()
+        let wake = services
+            .wake()
+            .expect("service name")
             .open()
             .expect("open wake")
             .notifier_builder()

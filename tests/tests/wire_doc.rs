@@ -837,6 +837,7 @@ fn documented_services_and_limits_are_what_dyfosd_creates() {
 /// literal reader hit first); with them a client loans every size a request may have.
 #[test]
 fn documented_client_port_settings_loan_every_size_a_request_may_have() {
+    use dyfos_shared::wire::services;
     use iceoryx2::prelude::*;
 
     let all = tables(DOC);
@@ -857,28 +858,16 @@ fn documented_client_port_settings_loan_every_size_a_request_may_have() {
 
     let sandbox = Sandbox::new("wire-doc-loan");
     let _daemon = sandbox.start_daemon(&[]);
-    let mut config = iceoryx2::config::Config::default();
-    config.global.prefix = FileName::new(sandbox.domain.as_bytes()).expect("domain");
+    let config = services::iceoryx_config(Some(&sandbox.domain)).expect("domain");
     let node = NodeBuilder::new()
         .config(&config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .expect("node");
     let names = ServiceNames::new(&sandbox.prefix).expect("prefix");
-    let name = |s: &str| ServiceName::new(s).expect("service name");
-    let rendezvous = node
-        .service_builder(&name(&names.rendezvous))
-        .request_response::<[WireDelta], RendezvousReply>()
-        .request_user_header::<RendezvousRequestHeader>()
-        .open()
-        .expect("open rendezvous");
-    let map = node
-        .service_builder(&name(&names.map))
-        .request_response::<[WireDelta], [WireDelta]>()
-        .request_user_header::<MapRequestHeader>()
-        .response_user_header::<MapReplyHeader>()
-        .open()
-        .expect("open map");
+    let services = services::Services::new(&node, &names);
+    let rendezvous = services.rendezvous().expect("service name").open().expect("open rendezvous");
+    let map = services.map().expect("service name").open().expect("open map");
 
     let plain = map.client_builder().create().expect("a client with iceoryx2's defaults");
     assert!(plain.loan_slice_uninit(1).is_ok());

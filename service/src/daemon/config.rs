@@ -43,8 +43,9 @@ pub struct DaemonConfig {
     /// processes of one domain see each other. Default unset: iceoryx2's `iox2_`.
     /// Letters, digits and `_`, 1–32 bytes.
     pub domain: Option<String>,
-    /// Search worker threads (`--workers`). Default 0: one per core. At least 2
-    /// are started whatever it says.
+    /// Searches run at once (`--workers`), one per worker thread (each worker has a
+    /// spare thread beside it, which stands in for a held search). Default 0: one
+    /// per core. At least 2 whatever it says.
     pub workers: usize,
     /// Model file of the learned SDSMM, from `dyfos train` (`--model`), loaded at
     /// start. Default unset: queries for model `learned` are refused
@@ -521,10 +522,9 @@ impl DaemonConfig {
     }
 
     /// The configuration as JSON (every key; unset ones are `null`), with
-    /// `workers` replaced by `threads`, the number started: the head of a
-    /// recording.
-    pub fn to_json(&self, threads: usize) -> serde_json::Value {
-        serde_json::to_value(DaemonConfig { workers: threads, ..self.clone() })
+    /// `workers` replaced by the number started: the head of a recording.
+    pub fn to_json(&self, workers: usize) -> serde_json::Value {
+        serde_json::to_value(DaemonConfig { workers, ..self.clone() })
             .unwrap_or_else(|e| serde_json::json!({ "error": e.to_string() }))
     }
 }

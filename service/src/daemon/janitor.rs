@@ -9,7 +9,7 @@
 //! a dead one) and raises a flag; the IPC thread then looks for searches whose
 //! clients have gone.
 
-use super::Ipc;
+use dyfos_shared::wire::services::Ipc;
 use iceoryx2::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex};

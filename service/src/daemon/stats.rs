@@ -1,9 +1,55 @@
 //! The stats service: counters kept by the IPC thread and the workers.
 
-use super::Daemon;
+use super::ports::{Replies, StatsActive};
+use super::state::State;
 use dyfos_shared::wire::stats::{STATUS_SLOTS, StatsReply, StatsRequest};
 use dyfos_shared::wire::{Status, join_u128};
 use tracing::debug;
+
+/// Answers one stats request.
+pub(super) fn on_request(state: &State, replies: &Replies, active: StatsActive) {
+    let request = *active.payload();
+    let reply = reply(state, &request);
+    match active.loan_uninit() {
+        Ok(loan) => {
+            if let Err(e) = loan.write_payload(reply).send() {
+                debug!("stats reply not delivered: {e:?}");
+            }
+        }
+        Err(e) => debug!("stats reply not delivered: {e:?}"),
+    }
+    replies.notify(join_u128(request.reply_to));
+}
+
+/// The counters now, as the reply to `request`.
+fn reply(state: &State, request: &StatsRequest) -> StatsReply {
+    let log = dyfos_process::logging::counters();
+    let (queued, running) = {
+        let q = state.pool.queue();
+        (q.queued() as u64, q.running() as u64)
+    };
+    let mut s = state.pool.stats();
+    StatsReply {
+        request_id: request.request_id,
+        pid: u64::from(std::process::id()),
+        uptime_micros: u64::try_from(s.started.elapsed().as_micros()).unwrap_or(u64::MAX),
+        queries_served: s.queries_served,
+        requests_failed: s.requests_failed,
+        map_requests: s.map_requests,
+        maps: state.maps.len() as u64,
+        queued,
+        running,
+        workers: state.pool.workers as u64,
+        latency_micros: s.percentiles(PERCENTILES_MAX_AGE),
+        latency_samples: s.latencies.len() as u64,
+        errors_by_code: s.errors,
+        queries_abandoned: s.queries_abandoned,
+        receive_failures: s.receive_failures,
+        log_warnings: log.warnings,
+        ipc_warnings: log.ipc_warnings,
+        log_suppressed: log.suppressed,
+    }
+}
 
 /// Latencies kept for the percentiles.
 const WINDOW: usize = 4096;
@@ -104,47 +150,6 @@ impl Stats {
         self.dirty = false;
         self.cached
     }
-}
-
-pub(super) fn on_request(
-    daemon: &mut Daemon,
-    active: iceoryx2::active_request::ActiveRequest<super::Ipc, StatsRequest, (), StatsReply, ()>,
-) {
-    let request = *active.payload();
-    let log = dyfos_process::logging::counters();
-    let (queued, running) = daemon.shared.queue.lock().map_or((0, 0), |q| (q.queued() as u64, q.running() as u64));
-    let reply = match daemon.shared.stats.lock() {
-        Ok(mut s) => StatsReply {
-            request_id: request.request_id,
-            pid: u64::from(std::process::id()),
-            uptime_micros: u64::try_from(s.started.elapsed().as_micros()).unwrap_or(u64::MAX),
-            queries_served: s.queries_served,
-            requests_failed: s.requests_failed,
-            map_requests: s.map_requests,
-            maps: daemon.maps.len() as u64,
-            queued,
-            running,
-            workers: daemon.shared.threads as u64,
-            latency_micros: s.percentiles(PERCENTILES_MAX_AGE),
-            latency_samples: s.latencies.len() as u64,
-            errors_by_code: s.errors,
-            queries_abandoned: s.queries_abandoned,
-            receive_failures: s.receive_failures,
-            log_warnings: log.warnings,
-            ipc_warnings: log.ipc_warnings,
-            log_suppressed: log.suppressed,
-        },
-        Err(_) => StatsReply { request_id: request.request_id, ..StatsReply::default() },
-    };
-    match active.loan_uninit() {
-        Ok(loan) => {
-            if let Err(e) = loan.write_payload(reply).send() {
-                debug!("stats reply not delivered: {e:?}");
-            }
-        }
-        Err(e) => debug!("stats reply not delivered: {e:?}"),
-    }
-    daemon.shared.notify(join_u128(request.reply_to));
 }
 
 #[cfg(test)]

@@ -35,6 +35,7 @@
 pub mod map;
 pub mod mission;
 pub mod rendezvous;
+pub mod services;
 pub mod stats;
 
 use crate::limits::{DETAIL_LEN, MAX_PREFIX_LEN};

@@ -82,9 +82,9 @@ pub struct LatencyArgs {
     #[arg(long, default_value = "bench/out")]
     out: PathBuf,
     /// How long each client busy-polls for a reply before it sleeps on the reply
-    /// event (`ClientConfig::spin`), µs; default: the client library's default.
+    /// event (`ClientConfig::poll`), µs; default: the client library's default.
     #[arg(long)]
-    client_spin_us: Option<u64>,
+    client_poll_us: Option<u64>,
     /// Skip the contention runs (cheap requests while searches run: `stats` and map
     /// requests beside `dyfos` clients, CPU hogs, a greedy client, clients that come
     /// and go, idle CPU); they also run against the second daemon.
@@ -130,9 +130,9 @@ pub struct WorkerArgs {
     /// Where to write the samples (JSON).
     #[arg(long)]
     out: PathBuf,
-    /// `ClientConfig::spin`, µs.
+    /// `ClientConfig::poll`, µs.
     #[arg(long)]
-    client_spin_us: Option<u64>,
+    client_poll_us: Option<u64>,
 }
 
 fn parse_workload(s: &str) -> Result<Workload, String> {
@@ -172,7 +172,7 @@ fn client_config(args: &WorkerArgs) -> ClientConfig {
         prefix: args.prefix.clone(),
         domain: Some(args.domain.clone()),
         connect_timeout: TIMEOUT,
-        spin: args.client_spin_us.map_or(defaults.spin, Duration::from_micros),
+        poll: args.client_poll_us.map_or(defaults.poll, Duration::from_micros),
     }
 }
 
@@ -454,7 +454,7 @@ impl Bench<'_> {
                     .args(["--rate", &per_client.to_string(), "--seconds", &a.seconds.to_string()])
                     .args(["--seed", &a.seed.to_string(), "--maps", &a.maps.to_string(), "--index", &i.to_string()])
                     .args(["--floor-service", &self.floor_service])
-                    .args(a.client_spin_us.iter().flat_map(|us| ["--client-spin-us".to_string(), us.to_string()]))
+                    .args(a.client_poll_us.iter().flat_map(|us| ["--client-poll-us".to_string(), us.to_string()]))
                     .arg("--out")
                     .arg(&out)
                     .stdin(Stdio::piped())
