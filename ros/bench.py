@@ -12,6 +12,11 @@ medians. A third path is ROS's own floor: the same request to a server in anothe
 process that answers at once without asking any daemon. ``--json FILE`` keeps the raw
 samples. Run it in the venv of ``ros/install.sh``
 (with a release binding: ``DYFOS_BINDING=target/release/lib_dyfos.so``).
+
+``--node [LABEL=]COMMAND`` names the node's executable (default: the venv's
+``dyfos-ros``); given more than once, every node runs (each under its own node name)
+and each is a path of its own in the same alternating blocks: two versions of the
+node compared on the same machine load.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Tuple
 
 import dyfos
 from dyfos import ros as dros
@@ -44,7 +49,11 @@ def percentile(samples: List[float], q: float) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--dyfosd", default=str(ROOT / "target" / "release" / "dyfosd"))
-    ap.add_argument("--node", default=str(Path(sys.executable).parent / "dyfos-ros"))
+    ap.add_argument(
+        "--node",
+        action="append",
+        help="[LABEL=]COMMAND of a node to time; repeat to compare nodes (default: the venv's dyfos-ros)",
+    )
     ap.add_argument("--algorithms", default="center,dyfos")
     ap.add_argument("--rounds", type=int, default=20, help="blocks of each path per algorithm")
     ap.add_argument("--count", type=int, default=50, help="queries per block")
@@ -68,21 +77,29 @@ def main() -> None:
     daemon = subprocess.Popen(
         [args.dyfosd, "--prefix", prefix, "--domain", domain, "--state-dir", state], stderr=subprocess.DEVNULL
     )
-    node = echo = None
+    nodes = node_commands(args.node or [str(Path(sys.executable).parent / "dyfos-ros")])
+    started: List[subprocess.Popen] = []
+    echo = None
     try:
         client = dyfos.Client(prefix=prefix, domain=domain, timeout=30.0, connect_timeout=30.0)
         scenario = dyfos.read_scenario(ROOT / "tests" / "data" / "example.json")
         map_id = client.upload_scenario(scenario)
-        node = subprocess.Popen(
-            [args.node, "--ros-args", "-p", f'prefix:="{prefix}"', "-p", f'domain:="{domain}"', "--log-level", "warn"]
-        )
+        for label, (command, name) in nodes.items():
+            started.append(
+                subprocess.Popen(
+                    [command, "--ros-args", "-r", f"__node:={name}", "-p", f'prefix:="{prefix}"']
+                    + ["-p", f'domain:="{domain}"', "--log-level", "warn"]
+                )
+            )
         echo = subprocess.Popen([sys.executable, __file__, "--serve-echo"])
         rclpy.init()
         ros = rclpy.create_node(f"rosbench_{pid}")
-        service = ros.create_client(FindSensorPose, "/dyfos/find_sensor_pose")
+        services = {
+            label: ros.create_client(FindSensorPose, f"/{name}/find_sensor_pose") for label, (_c, name) in nodes.items()
+        }
         floor = ros.create_client(FindSensorPose, "/rosbench_echo/find_sensor_pose")
         end = time.monotonic() + 30.0
-        while not (service.service_is_ready() and floor.service_is_ready()):
+        while not (all(s.service_is_ready() for s in services.values()) and floor.service_is_ready()):
             if time.monotonic() > end:
                 raise SystemExit("the node's service did not appear within 30 s")
             rclpy.spin_once(ros, timeout_sec=0.05)
@@ -91,7 +108,7 @@ def main() -> None:
         yaw = dros.yaw_from_quaternion(belief["pose"]["orientation"])
         mean, cov = [scenario["rover"]["mean"][0], scenario["rover"]["mean"][1], yaw], scenario["rover"]["cov"]
 
-        def ros_call(algorithm: str, to: Any = service) -> float:
+        def ros_call(algorithm: str, to: Any) -> float:
             req = FindSensorPose.Request(map_id=map_id, algorithm=algorithm, seed=1)
             req.belief.header.frame_id = "map"
             p, o = belief["pose"]["position"], belief["pose"]["orientation"]
@@ -115,14 +132,16 @@ def main() -> None:
         load = f"{os.getloadavg()[0]:.1f}"
         samples: Dict[str, Dict[str, List[float]]] = {}
         for algorithm in args.algorithms.split(","):
-            got = samples[algorithm] = {"direct": [], "ros": [], "ros floor": []}
+            got = samples[algorithm] = {"direct": [], **{label: [] for label in services}, "ros floor": []}
             for _ in range(args.count):  # warm up every path
-                ros_call(algorithm)
+                for to in services.values():
+                    ros_call(algorithm, to)
                 ros_call(algorithm, floor)
                 direct_call(algorithm)
             for _ in range(args.rounds):
                 got["direct"] += [direct_call(algorithm) for _ in range(args.count)]
-                got["ros"] += [ros_call(algorithm) for _ in range(args.count)]
+                for label, to in services.items():
+                    got[label] += [ros_call(algorithm, to) for _ in range(args.count)]
                 got["ros floor"] += [ros_call(algorithm, floor) for _ in range(args.count)]
 
         print(f"load average before: {load}, after: {os.getloadavg()[0]:.1f}")
@@ -131,27 +150,41 @@ def main() -> None:
         print("| algorithm | path | median (ms) | p99 (ms) |")
         print("|---|---|---|---|")
         for algorithm, got in samples.items():
-            for path in ("direct", "ros", "ros floor"):
-                s = got[path]
+            for path, s in got.items():
                 print(f"| {algorithm} | {path} | {statistics.median(s) * 1e3:.3f} | {percentile(s, 0.99) * 1e3:.3f} |")
-            med = {path: statistics.median(got[path]) for path in got}
-            print(f"| {algorithm} | ros − direct (medians) | {(med['ros'] - med['direct']) * 1e3:.3f} | |")
-            print(
-                f"| {algorithm} | ros − direct − ros floor | {(med['ros'] - med['direct'] - med['ros floor']) * 1e3:.3f} | |"
-            )
+            med = {path: statistics.median(s) for path, s in got.items()}
+            for label in services:
+                print(f"| {algorithm} | {label} − direct (medians) | {(med[label] - med['direct']) * 1e3:.3f} | |")
+                extra = med[label] - med["direct"] - med["ros floor"]
+                print(f"| {algorithm} | {label} − direct − ros floor | {extra * 1e3:.3f} | |")
         if args.json:
             Path(args.json).write_text(json.dumps(samples))
         ros.destroy_node()
         rclpy.try_shutdown()
         client.close()
     finally:
-        for p in (node, echo):
+        for p in [*started, echo]:
             if p is not None:
                 p.send_signal(signal.SIGINT)
                 p.wait(timeout=30)
         daemon.terminate()
         daemon.wait(timeout=30)
         shutil.rmtree(state, ignore_errors=True)
+
+
+def node_commands(specs: List[str]) -> Dict[str, Tuple[str, str]]:
+    """``[LABEL=]COMMAND`` each → {label: (command, node name)}. One node keeps the
+    default name and the label ``ros``; several are ``dyfos``, ``dyfos_2``, ... with
+    their commands' names (or the labels given) as labels."""
+    nodes: Dict[str, Tuple[str, str]] = {}
+    for i, spec in enumerate(specs):
+        label, _eq, command = spec.rpartition("=")
+        if not label:
+            label = "ros" if len(specs) == 1 else f"ros {Path(command).name}"
+        if label in nodes:
+            label = f"{label} #{i + 1}"
+        nodes[label] = (command, "dyfos" if i == 0 else f"dyfos_{i + 1}")
+    return nodes
 
 
 def serve_echo() -> None:
