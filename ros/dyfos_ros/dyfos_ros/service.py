@@ -83,6 +83,7 @@ class ServiceThread:
         self._service = node.create_service(
             srv_type, name, self._never_called, callback_group=_NoExecutor()
         )
+        self._name = self._service.service_name
         self._wake = GuardCondition(callback=None, callback_group=None, context=self._context)
         self._context.on_shutdown(self._wake_up)
         self._lock = threading.Lock()
@@ -131,7 +132,7 @@ class ServiceThread:
                     taken = self._take()
                 except Exception as e:  # the node or ROS shut down under the wait, or a bug
                     if not self._stopping and self._context.ok():
-                        self._logger.error(f"{self._service.srv_name}: no longer served: {type(e).__name__}: {e}")
+                        self._logger.error(f"{self._name}: no longer served: {type(e).__name__}: {e}")
                     return
                 if taken is None:
                     if self._stopping or not self._context.ok():
@@ -181,4 +182,4 @@ class ServiceThread:
         try:
             self._service.send_response(response, header)
         except Exception as e:  # the node is shutting down, or a bug: the caller's own timeout ends its wait
-            self._logger.warning(f"{self._service.srv_name}: response not sent: {e}", throttle_duration_sec=5.0)
+            self._logger.warning(f"{self._name}: response not sent: {e}", throttle_duration_sec=5.0)

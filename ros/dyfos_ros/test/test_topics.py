@@ -136,3 +136,19 @@ def test_a_long_search_holds_up_no_topic_timer_or_parameter_service(ros: Ros, da
         assert set_seed.result().results[0].successful
         assert not searching.done(), "the search ended before the node answered the rest: nothing was shown"
         assert client.stats()["running"] >= 1
+
+
+def test_markers_of_an_answer_reach_a_subscriber_that_comes_later(ros: Ros, daemon: Any, start_node: Any) -> None:
+    """Markers are drawn only while someone subscribes; one who subscribes after the
+    answer still gets that answer's markers (transient local), not nothing."""
+    s = dyfos.read_scenario(DATA / "example.json")
+    with daemon.client() as client:
+        map_id = client.upload_scenario(DATA / "example.json", map_id=0x53)
+    start_node(ros, daemon)
+    answer = ros.call(FindSensorPose, SERVICE, request(map_id, s))
+    assert answer.success
+    markers = ros.subscribe(MarkerArray, "/dyfos/markers", LATCHED)
+    ros.spin_until(lambda: markers, what="the markers of the answer given before")
+    sight = {m.id: m for m in markers[-1].markers}[1]
+    p = answer.sensor_pose.pose.position
+    assert [sight.points[0].x, sight.points[0].y, sight.points[0].z] == [p.x, p.y, p.z]
