@@ -227,6 +227,10 @@ class DyfosNode(Node):
         self._failed: Dict[str, int] = {}
         self._daemon_pid: Optional[int] = 0  # not yet asked: the first answer is logged
         self._daemon_error = ""
+        # The service's answers are filled into this one response (on the service's
+        # thread): building a response costs more than filling one, and send_response
+        # has serialized it when it returns. A refusal gets a new one (numbers at zero).
+        self._answered = FindSensorPose.Response()
 
         self._sensor_goal = self.create_publisher(PoseStamped, "~/sensor_goal", 10)
         self._viewer_goal = self.create_publisher(PoseStamped, "~/viewer_goal", 10)
@@ -338,7 +342,6 @@ class DyfosNode(Node):
 
     def _find_sensor_pose(self, request: Any, client: Callable[[], dyfos.Client]) -> Handled:
         # On the service's thread (ServiceThread): asks the daemon itself.
-        response = FindSensorPose.Response()
         frame_id = self._param("frame_id")
         try:
             params = convert.params_from_parameters(request.params, self._spec_params())
@@ -355,11 +358,11 @@ class DyfosNode(Node):
         except Exception as e:
             status, message, version = convert.error_of(e)
             self._count(status)
-            return convert.fill_error(response, status, message, version), None
+            return convert.fill_error(FindSensorPose.Response(), status, message, version), None
         self._count("")
         stamp = request.belief.header.stamp
         return (
-            convert.fill_response(response, answer, request.belief, frame_id),
+            convert.fill_response(self._answered, answer, request.belief, frame_id),
             lambda: self._painter.draw(answer, mean, params, frame_id, stamp),
         )
 
