@@ -16,7 +16,8 @@ samples. Run it in the venv of ``ros/install.sh``
 ``--node [LABEL=]COMMAND`` names the node's executable (default: the venv's
 ``dyfos-ros``); given more than once, every node runs (each under its own node name)
 and each is a path of its own in the same alternating blocks: two versions of the
-node compared on the same machine load.
+node compared on the same machine load. ``--markers`` adds a process that subscribes to
+every node's ``~/markers`` (RViz open), so that the nodes draw them.
 """
 
 from __future__ import annotations
@@ -59,10 +60,15 @@ def main() -> None:
     ap.add_argument("--count", type=int, default=50, help="queries per block")
     ap.add_argument("--domain-id", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "87")))
     ap.add_argument("--json", help="write every sample (seconds) here")
+    ap.add_argument("--markers", action="store_true", help="subscribe to every node's ~/markers meanwhile")
     ap.add_argument("--serve-echo", action="store_true", help=argparse.SUPPRESS)  # the floor's server
+    ap.add_argument("--watch", nargs="*", help=argparse.SUPPRESS)  # the markers' subscriber
     args = ap.parse_args()
     if args.serve_echo:
         serve_echo()
+        return
+    if args.watch is not None:
+        watch(args.watch)
         return
 
     os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
@@ -92,6 +98,9 @@ def main() -> None:
                 )
             )
         echo = subprocess.Popen([sys.executable, __file__, "--serve-echo"])
+        if args.markers:
+            topics = [f"/{name}/markers" for _c, name in nodes.values()]
+            started.append(subprocess.Popen([sys.executable, __file__, "--watch", *topics]))
         rclpy.init()
         ros = rclpy.create_node(f"rosbench_{pid}")
         services = {
@@ -99,9 +108,14 @@ def main() -> None:
         }
         floor = ros.create_client(FindSensorPose, "/rosbench_echo/find_sensor_pose")
         end = time.monotonic() + 30.0
-        while not (all(s.service_is_ready() for s in services.values()) and floor.service_is_ready()):
+        watched = [f"/{name}/markers" for _c, name in nodes.values()] if args.markers else []
+        while not (
+            all(s.service_is_ready() for s in services.values())
+            and floor.service_is_ready()
+            and all(ros.count_subscribers(t) >= 1 for t in watched)
+        ):
             if time.monotonic() > end:
-                raise SystemExit("the node's service did not appear within 30 s")
+                raise SystemExit("the nodes' services (and markers' subscriber) did not appear within 30 s")
             rclpy.spin_once(ros, timeout_sec=0.05)
 
         belief = dros.belief_to_pose_with_covariance(scenario["rover"]["mean"], scenario["rover"]["cov"])
@@ -146,7 +160,8 @@ def main() -> None:
 
         print(f"load average before: {load}, after: {os.getloadavg()[0]:.1f}")
         print(f"machine: {platform.node()}, {os.cpu_count()} cores, {cpu_model()}; {time.strftime('%Y-%m-%d')}")
-        print(f"{args.rounds} alternating blocks of {args.count} queries per path and algorithm\n")
+        print(f"{args.rounds} alternating blocks of {args.count} queries per path and algorithm")
+        print("markers subscribed: the nodes draw them\n" if args.markers else "nobody subscribes to ~/markers\n")
         print("| algorithm | path | median (ms) | p99 (ms) |")
         print("|---|---|---|---|")
         for algorithm, got in samples.items():
@@ -200,6 +215,26 @@ def serve_echo() -> None:
     rclpy.init()
     node = rclpy.create_node("rosbench_echo")
     node.create_service(FindSensorPose, "~/find_sensor_pose", answer)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def watch(topics: List[str]) -> None:
+    """Subscribes to ``topics`` (MarkerArray, as RViz does) until SIGINT."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from visualization_msgs.msg import MarkerArray
+
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    rclpy.init()
+    node = rclpy.create_node("rosbench_markers")
+    for topic in topics:
+        node.create_subscription(MarkerArray, topic, lambda _msg: None, qos)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
