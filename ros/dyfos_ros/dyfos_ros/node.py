@@ -250,7 +250,7 @@ class DyfosNode(Node):
             FindSensorPose,
             "~/find_sensor_pose",
             self._find_sensor_pose,
-            lambda status, message: convert.fill_error(FindSensorPose.Response(), status, message),
+            lambda status, message: convert.fill_error(FindSensorPose.Response(), status, convert.clip(message)),
             connect,
             "dyfos-query",
         )

@@ -145,7 +145,8 @@ class ServiceThread:
                     self._answering = header
                 try:
                     response, then = self._handle(request, self._client_now)
-                except Exception as e:  # a bug: the caller still gets an answer
+                except Exception as e:  # a bug: say so; the caller still gets an answer
+                    self._logger.error(f"{self._name}: {type(e).__name__}: {e}", throttle_duration_sec=5.0)
                     response, then = self._refuse("internal_error", f"{type(e).__name__}: {e}"), None
                 with self._lock:
                     if self._answering is not header:  # stop() answered it
@@ -153,7 +154,10 @@ class ServiceThread:
                     self._answering = None
                     self._send(response, header)
                 if then is not None:
-                    then()
+                    try:
+                        then()
+                    except Exception as e:  # a bug, or the node shutting down: keep serving
+                        self._logger.error(f"{self._name}: after the answer: {type(e).__name__}: {e}")
         finally:
             if self._client is not None:
                 self._client.close()
