@@ -8,7 +8,10 @@ through the ``dyfos`` binding's direct call, in alternating blocks against one
 Starts its own dyfosd (own prefix, iceoryx2 domain and state directory) and node (own
 ROS domain id, discovery on this machine only), uploads ``tests/data/example.json``, and
 prints per algorithm the median and p99 of each path and the difference of the
-medians. A third path is ROS's own floor: the same request to a server in another
+medians. The direct call sends what the node sends (every SPEC §11 parameter, at its
+default), back to back, and again with 1 ms between calls ("direct 1 ms apart": the
+pace the daemon is asked at through ROS, where it sleeps between requests and must be
+woken). Another path is ROS's own floor: the same request to a server in another
 process that answers at once without asking any daemon. ``--json FILE`` keeps the raw
 samples. Run it in the venv of ``ros/install.sh``
 (with a release binding: ``DYFOS_BINDING=target/release/lib_dyfos.so``).
@@ -40,6 +43,7 @@ import dyfos
 from dyfos import ros as dros
 
 ROOT = Path(__file__).resolve().parents[1]
+PACED = "direct 1 ms apart"
 
 
 def percentile(samples: List[float], q: float) -> float:
@@ -138,15 +142,20 @@ def main() -> None:
             assert future.result().success, future.result().message
             return took
 
-        def direct_call(algorithm: str) -> float:
+        # What the node sends: its parameters, at SPEC's defaults here.
+        params = dyfos.default_params()
+
+        def direct_call(algorithm: str, pause: float = 0.0) -> float:
+            if pause:
+                time.sleep(pause)
             start = time.perf_counter()
-            client.rendezvous(map_id, mean, cov, algorithm=algorithm, seed=1)
+            client.rendezvous(map_id, mean, cov, algorithm=algorithm, seed=1, params=params)
             return time.perf_counter() - start
 
         load = f"{os.getloadavg()[0]:.1f}"
         samples: Dict[str, Dict[str, List[float]]] = {}
         for algorithm in args.algorithms.split(","):
-            got = samples[algorithm] = {"direct": [], **{label: [] for label in services}, "ros floor": []}
+            got = samples[algorithm] = {"direct": [], PACED: [], **{label: [] for label in services}, "ros floor": []}
             for _ in range(args.count):  # warm up every path
                 for to in services.values():
                     ros_call(algorithm, to)
@@ -154,6 +163,7 @@ def main() -> None:
                 direct_call(algorithm)
             for _ in range(args.rounds):
                 got["direct"] += [direct_call(algorithm) for _ in range(args.count)]
+                got[PACED] += [direct_call(algorithm, 0.001) for _ in range(args.count)]
                 for label, to in services.items():
                     got[label] += [ros_call(algorithm, to) for _ in range(args.count)]
                 got["ros floor"] += [ros_call(algorithm, floor) for _ in range(args.count)]
@@ -172,6 +182,8 @@ def main() -> None:
                 print(f"| {algorithm} | {label} − direct (medians) | {(med[label] - med['direct']) * 1e3:.3f} | |")
                 extra = med[label] - med["direct"] - med["ros floor"]
                 print(f"| {algorithm} | {label} − direct − ros floor | {extra * 1e3:.3f} | |")
+                extra = med[label] - med[PACED] - med["ros floor"]
+                print(f"| {algorithm} | {label} − {PACED} − ros floor | {extra * 1e3:.3f} | |")
         if args.json:
             Path(args.json).write_text(json.dumps(samples))
         ros.destroy_node()
