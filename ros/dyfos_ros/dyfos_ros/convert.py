@@ -125,9 +125,12 @@ def viewer_pose(answer: dyfos.Answer, frame_id: str, stamp: Any, into: Optional[
 
 def fill_response(response: Any, answer: dyfos.Answer, belief: Any, frame_id: str) -> Any:
     """A ``FindSensorPose`` response from an answer to ``belief``; poses stamped with
-    the belief's time (the rendezvous) in ``frame_id``."""
+    the belief's time (the rendezvous) in ``frame_id``. Sets every field, so that
+    ``response`` may be one filled before."""
     stamp = belief.header.stamp
     response.success = True
+    response.status = ""
+    response.message = ""
     response.x = answer.x
     response.cost = answer.cost
     sensor_pose(answer, frame_id, stamp, into=response.sensor_pose)

@@ -6,16 +6,20 @@ Interfaces (names relative to the node, default name ``dyfos``):
 - ``~/belief`` (``geometry_msgs/PoseWithCovarianceStamped``) in, answered with the node's
   ``map_id``, ``algorithm``, ``seed`` and ``deadline`` on ``~/sensor_goal`` and
   ``~/viewer_goal`` (``geometry_msgs/PoseStamped``);
-- ``~/markers`` (``visualization_msgs/MarkerArray``) for every answer;
+- ``~/markers`` (``visualization_msgs/MarkerArray``) for the newest answer;
 - ``/diagnostics`` (``diagnostic_msgs/DiagnosticArray``): the daemon's stats and health,
   the map and the node's queries;
 - maps in: ``octomap_topic`` (``octomap_msgs/Octomap``, default ``octomap_binary``) and
   ``cloud_topic`` (``sensor_msgs/PointCloud2`` of occupied-cell centres, off by default).
 
-Every call to the daemon goes through the ``dyfos`` binding, on worker threads
-(:mod:`dyfos_ros.worker`); the executor's threads handle ROS, and a service call's
-thread sleeps until its worker has the answer. docs/ros2.md documents
-the parameters.
+Every call to the daemon goes through the ``dyfos`` binding, each kind on a thread with
+a client of its own. The service is answered on its own thread, outside the executor
+(:mod:`dyfos_ros.service`): it takes a request, asks the daemon and sends the response,
+with no hand-off on the way. Everything else runs on a single-threaded executor whose
+callbacks only hand work to worker threads (:mod:`dyfos_ros.worker`) and return, so a
+long search or map upload holds up no topic, timer or parameter service. Markers are
+drawn after the response is sent, on a thread of their own (:mod:`dyfos_ros.painter`).
+docs/ros2.md documents the parameters.
 """
 
 from __future__ import annotations
@@ -36,17 +40,17 @@ from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from octomap_msgs.msg import Octomap
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import PointCloud2
-from visualization_msgs.msg import MarkerArray
 
-from . import convert, markers
+from . import convert
 from .maps import MapError, MapSync, settings_from
+from .painter import Painter
+from .service import Handled, ServiceThread
 from .worker import SUPERSEDED, Stopped, Worker
 
 NODE_NAME = "dyfos"
@@ -189,11 +193,10 @@ MAP_PARAMETERS = ("map_id", "bounds", "sun", "origin", "cloud_resolution")
 
 #: Map topics: reliable and transient local (latched), as octomap_server publishes them.
 MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-MARKER_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 CONNECT_TIMEOUT = 0.25
-#: Executor threads: each service call waiting for the daemon holds one.
-EXECUTOR_THREADS = 8
+#: Seconds between two drawings of ~/markers at most (the newest answer is drawn).
+MARKERS_PERIOD = 0.1
 
 
 class DyfosNode(Node):
@@ -217,34 +220,40 @@ class DyfosNode(Node):
             return dyfos.Client(prefix=self._prefix, domain=self._domain, timeout=10.0, connect_timeout=CONNECT_TIMEOUT)
 
         # One client each: a map upload holds up neither a query nor the diagnostics.
-        self._workers = {name: Worker(f"dyfos-{name}", connect) for name in ("query", "stream", "map", "stats")}
-        self._painter = self._workers["markers"] = Worker("dyfos-markers", None)
+        self._workers = {name: Worker(f"dyfos-{name}", connect) for name in ("stream", "map", "stats")}
         self._maps = MapSync(self._map_settings, lambda line: self.get_logger().info(line))
         self._counts_lock = threading.Lock()
         self._served = 0
         self._failed: Dict[str, int] = {}
         self._daemon_pid: Optional[int] = 0  # not yet asked: the first answer is logged
         self._daemon_error = ""
+        # The service's answers are filled into this one response (on the service's
+        # thread): building a response costs more than filling one, and send_response
+        # has serialized it when it returns. A refusal gets a new one (numbers at zero).
+        self._answered = FindSensorPose.Response()
 
         self._sensor_goal = self.create_publisher(PoseStamped, "~/sensor_goal", 10)
         self._viewer_goal = self.create_publisher(PoseStamped, "~/viewer_goal", 10)
-        self._markers = self.create_publisher(MarkerArray, "~/markers", MARKER_QOS)
+        self._painter = Painter(self, "~/markers", MARKERS_PERIOD)
+        self._workers["markers"] = self._painter.worker
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        # Reentrant: a service call waiting for the daemon holds one executor thread and
-        # nothing else; the other callbacks only hand work to a worker.
-        group = ReentrantCallbackGroup()
-        self.create_subscription(PoseWithCovarianceStamped, "~/belief", self._belief, 10, callback_group=group)
+        # The executor's callbacks only hand work to a worker and return.
+        self.create_subscription(PoseWithCovarianceStamped, "~/belief", self._belief, 10)
         if self._param("octomap_topic"):
-            self.create_subscription(
-                Octomap, self._param("octomap_topic"), self._octomap, MAP_QOS, callback_group=group
-            )
+            self.create_subscription(Octomap, self._param("octomap_topic"), self._octomap, MAP_QOS)
         if self._param("cloud_topic"):
-            self.create_subscription(
-                PointCloud2, self._param("cloud_topic"), self._cloud, MAP_QOS, callback_group=group
-            )
-        self.create_timer(float(self._param("diagnostics_period")), self._diagnose, callback_group=group)
+            self.create_subscription(PointCloud2, self._param("cloud_topic"), self._cloud, MAP_QOS)
+        self.create_timer(float(self._param("diagnostics_period")), self._diagnose)
         # Last: the service on the graph means the node is ready.
-        self.create_service(FindSensorPose, "~/find_sensor_pose", self._find_sensor_pose, callback_group=group)
+        self._service = ServiceThread(
+            self,
+            FindSensorPose,
+            "~/find_sensor_pose",
+            self._find_sensor_pose,
+            lambda status, message: convert.fill_error(FindSensorPose.Response(), status, convert.clip(message)),
+            connect,
+            "dyfos-query",
+        )
         self.get_logger().info(
             f"serving ~/find_sensor_pose from dyfosd prefix={self._prefix!r} domain={self._domain!r}, "
             f"map_id={self._param('map_id')}, frame {self._param('frame_id')!r}"
@@ -295,7 +304,6 @@ class DyfosNode(Node):
 
     def _query(
         self,
-        worker: str,
         map_id: int,
         belief: PoseWithCovarianceStamped,
         algorithm: str,
@@ -303,9 +311,8 @@ class DyfosNode(Node):
         deadline: float,
         params: Dict[str, Any],
         budget: Optional[int],
-        key: Optional[str] = None,
     ):
-        """Validates a query and hands it to a worker: returns ``(future, mean)``."""
+        """Validates a query: returns ``(job, mean)``, the job asking a client for it."""
         mean, cov = convert.belief_from_msg(belief, self._param("frame_id"))
         if not (math.isfinite(deadline) and deadline >= 0):
             raise convert.RequestError("invalid_deadline", f"deadline = {deadline} s must be >= 0 (0: none)")
@@ -324,7 +331,7 @@ class DyfosNode(Node):
                 timeout=timeout,
             )
 
-        return self._workers[worker].submit(job, key=key), mean
+        return job, mean
 
     def _count(self, status: str) -> None:
         with self._counts_lock:
@@ -333,13 +340,12 @@ class DyfosNode(Node):
             else:
                 self._served += 1
 
-    def _find_sensor_pose(self, request: Any, response: Any) -> Any:
-        # Runs on an executor thread, which sleeps until the worker has the answer.
+    def _find_sensor_pose(self, request: Any, client: Callable[[], dyfos.Client]) -> Handled:
+        # On the service's thread (ServiceThread): asks the daemon itself.
         frame_id = self._param("frame_id")
         try:
             params = convert.params_from_parameters(request.params, self._spec_params())
-            future, mean = self._query(
-                "query",
+            job, mean = self._query(
                 request.map_id,
                 request.belief,
                 request.algorithm or "dyfos",
@@ -348,35 +354,23 @@ class DyfosNode(Node):
                 params,
                 request.budget or None,
             )
-            answer = future.result()
-        except Stopped as e:
-            return convert.fill_error(response, "shutting_down", str(e))
+            answer = job(client())
         except Exception as e:
             status, message, version = convert.error_of(e)
             self._count(status)
-            return convert.fill_error(response, status, message, version)
+            return convert.fill_error(FindSensorPose.Response(), status, message, version), None
         self._count("")
-        self._draw(answer, mean, params, frame_id, request.belief.header.stamp)
-        return convert.fill_response(response, answer, request.belief, frame_id)
-
-    def _draw(self, answer: dyfos.Answer, mean: List[float], params: Dict[str, Any], frame_id: str, stamp: Any) -> None:
-        """Publishes an answer's markers from the painter's thread: drawing them holds the
-        GIL for a while, which the response should not wait for. Only the newest waits."""
-
-        def draw(_client: None) -> None:
-            try:
-                self._markers.publish(markers.markers(answer, mean, params, frame_id, stamp))
-            except Exception as e:  # a bug, or the node shutting down: say so, keep serving
-                self.get_logger().error(f"~/markers: {type(e).__name__}: {e}", throttle_duration_sec=5.0)
-
-        self._painter.submit(draw, key="markers")
+        stamp = request.belief.header.stamp
+        return (
+            convert.fill_response(self._answered, answer, request.belief, frame_id),
+            lambda: self._painter.draw(answer, mean, params, frame_id, stamp),
+        )
 
     def _belief(self, msg: PoseWithCovarianceStamped) -> None:
         frame_id = self._param("frame_id")
         try:
             params = self._spec_params()
-            future, mean = self._query(
-                "stream",
+            job, mean = self._query(
                 self._param("map_id"),
                 msg,
                 self._param("algorithm"),
@@ -384,11 +378,11 @@ class DyfosNode(Node):
                 float(self._param("deadline")),
                 params,
                 None,
-                key="belief",
             )
         except Exception as e:
             self._belief_failed(e)
             return
+        future = self._workers["stream"].submit(job, key="belief")
 
         def publish(done: Future) -> None:
             # On the worker's thread, when the answer comes.
@@ -405,7 +399,7 @@ class DyfosNode(Node):
             stamp = msg.header.stamp
             self._sensor_goal.publish(convert.sensor_pose(answer, frame_id, stamp))
             self._viewer_goal.publish(convert.viewer_pose(answer, frame_id, stamp))
-            self._draw(answer, mean, params, frame_id, stamp)
+            self._painter.draw(answer, mean, params, frame_id, stamp)
 
         future.add_done_callback(publish)
 
@@ -549,12 +543,14 @@ class DyfosNode(Node):
     # Shutdown -------------------------------------------------------------------
 
     def stop_workers(self, wait: float = 0.5) -> bool:
-        """Stops the workers; whether every one ended within ``wait`` s (a call still
-        in the daemon keeps one, which must not hold the process up)."""
-        for w in self._workers.values():
-            w.stop()
+        """Stops the service's thread (a request it holds is answered ``shutting_down``)
+        and the workers; whether every one ended within ``wait`` s (a call still in the
+        daemon keeps one, which must not hold the process up)."""
+        threads = [self._service, *self._workers.values()]
+        for t in threads:
+            t.stop()
         end = time.monotonic() + wait
-        return all(w.join(max(0.0, end - time.monotonic())) for w in self._workers.values())
+        return all(t.join(max(0.0, end - time.monotonic())) for t in threads)
 
 
 def _flatten(d: Dict[str, Any], prefix: str = ""):
@@ -585,7 +581,7 @@ def main(args: Optional[List[str]] = None) -> None:
         sys.exit(2)
     rclpy.init(args=argv)
     node: Optional[DyfosNode] = None
-    executor = MultiThreadedExecutor(num_threads=EXECUTOR_THREADS)
+    executor = SingleThreadedExecutor()
     clean, status = True, 0
     try:
         node = DyfosNode()
@@ -602,7 +598,8 @@ def main(args: Optional[List[str]] = None) -> None:
         # Ctrl-C or SIGTERM while the node was being made: a stop, not an error.
     finally:
         if node is not None:
-            # First the workers: a service call waiting for the daemon returns at once.
+            # First the service and the workers: a request in the daemon's hands is
+            # answered at once (shutting_down).
             clean = node.stop_workers()
         executor.shutdown(timeout_sec=10.0)
         if node is not None:

@@ -1,12 +1,10 @@
-"""A thread with its own ``dyfos.Client``: the node's calls to the daemon run here, so a
-long search or map upload holds up neither other callbacks nor Ctrl-C.
+"""A thread with its own ``dyfos.Client``: the node's calls to the daemon for topics and
+timers run here, so a map upload or a stream of beliefs holds up neither other callbacks
+nor Ctrl-C.
 
 A job is a function of the client; :meth:`Worker.submit` returns a
-:class:`concurrent.futures.Future` of its result. The service callback waits on it (its
-executor thread sleeps, no CPU); topic and timer callbacks add a done callback that
-publishes from the worker's thread and return at once. (Not an rclpy coroutine: jazzy's
-executor re-runs a waiting coroutine on every turn, which spins a core for as long as the
-daemon searches.)
+:class:`concurrent.futures.Future` of its result. Topic and timer callbacks add a done
+callback that publishes from the worker's thread, and return at once.
 
 Jobs run one at a time, in order. A job submitted with a ``key`` replaces a job of the
 same key that has not started (its future gets :data:`SUPERSEDED`): a stream of beliefs

@@ -55,20 +55,23 @@ def test_no_daemon_is_reported_and_the_node_outlives_a_dyfosd_restart(
 
 def test_ctrl_c_ends_the_node_during_a_long_search(ros: Ros, daemon: Any, start_node: Any) -> None:
     """SIGINT while the daemon searches for the node (about 10 s of ``brute``): the node
-    exits 0 without waiting for the answer; the daemon abandons the search."""
+    answers the request ``shutting_down`` and exits 0 without waiting for the search; the
+    daemon abandons it."""
     node = start_node(ros, daemon)
     slow = pyconftest.slow_scenario()
     with daemon.client() as client:
         map_id = client.upload_scenario(slow)
         client_req = request(map_id, slow, algorithm="brute")
         future = ros.client(FindSensorPose, SERVICE).call_async(client_req)
-        eventually(lambda: client.stats()["running"] >= 1, "the search to run")
+        eventually(lambda: client.stats()["running"] >= 1, "the search to run", spin=ros)
         node.process.send_signal(signal.SIGINT)
         # Well before the search could end: the node did not wait for it.
         assert node.process.wait(timeout=5.0) == 0, node.log()
+        ros.spin_until(future.done, timeout=5.0, what="the answer to the request in hand")
+        r = future.result()
+        assert (r.success, r.status) == (False, "shutting_down"), r
         eventually(lambda: client.stats()["queries_abandoned"] >= 1, "the daemon to abandon the search")
         assert client.stats()["queries_served"] == 0
-    del future
 
 
 def test_ctrl_c_and_sigterm_end_an_idle_node(ros: Ros, daemon: Any, start_node: Any) -> None:

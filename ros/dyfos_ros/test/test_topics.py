@@ -8,12 +8,13 @@ from pathlib import Path
 from typing import Any, Dict
 
 import dyfos
-from conftest import DATA, LATCHED, Ros
+from conftest import DATA, LATCHED, Ros, pyconftest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from dyfos import ros as dros
 from dyfos_msgs.srv import FindSensorPose
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-from helpers import SERVICE, belief_msg, hexes, request, solve, status_of
+from helpers import SERVICE, belief_msg, eventually, hexes, parameters, request, solve, status_of
+from rcl_interfaces.srv import SetParameters
 from visualization_msgs.msg import Marker, MarkerArray
 
 
@@ -108,3 +109,46 @@ def test_diagnostics_carry_the_daemons_stats_and_health(ros: Ros, daemon: Any, s
     assert (q["answered"], q["refused.unknown_map"]) == ("1", "1")
     map_status = status_of(last, "map")
     assert map_status.level == DiagnosticStatus.WARN and "octomap_binary" in map_status.message
+
+
+def test_a_long_search_holds_up_no_topic_timer_or_parameter_service(ros: Ros, daemon: Any, start_node: Any) -> None:
+    """While ~/find_sensor_pose waits for a search of seconds (``brute``), a belief on
+    ~/belief is answered, /diagnostics keep coming, and the parameter services answer:
+    the service's wait blocks nothing else of the node."""
+    slow = pyconftest.slow_scenario()
+    s = dyfos.read_scenario(DATA / "example.json")
+    with daemon.client() as client:
+        slow_map = client.upload_scenario(slow, map_id=0x51)
+        fast_map = client.upload_scenario(DATA / "example.json", map_id=0x52)
+        start_node(ros, daemon, map_id=fast_map, diagnostics_period=0.2)
+        sensor_goals = ros.subscribe(PoseStamped, "/dyfos/sensor_goal")
+        diagnostics = ros.subscribe(DiagnosticArray, "/diagnostics")
+        beliefs = ros.publisher(PoseWithCovarianceStamped, "/dyfos/belief")
+        setter = ros.client(SetParameters, "/dyfos/set_parameters")
+        ros.spin_until(lambda: beliefs.get_subscription_count() == 1, what="the node to subscribe to ~/belief")
+        searching = ros.client(FindSensorPose, SERVICE).call_async(request(slow_map, slow, algorithm="brute"))
+        eventually(lambda: client.stats()["running"] >= 1, "the search to run", spin=ros)
+
+        diagnostics.clear()
+        beliefs.publish(belief_msg(s["rover"]["mean"], s["rover"]["cov"]))
+        set_seed = setter.call_async(SetParameters.Request(parameters=parameters({"seed": 4})))
+        ros.spin_until(lambda: sensor_goals and len(diagnostics) >= 2 and set_seed.done(), what="the node's answers")
+        assert set_seed.result().results[0].successful
+        assert not searching.done(), "the search ended before the node answered the rest: nothing was shown"
+        assert client.stats()["running"] >= 1
+
+
+def test_markers_of_an_answer_reach_a_subscriber_that_comes_later(ros: Ros, daemon: Any, start_node: Any) -> None:
+    """Markers are drawn only while someone subscribes; one who subscribes after the
+    answer still gets that answer's markers (transient local), not nothing."""
+    s = dyfos.read_scenario(DATA / "example.json")
+    with daemon.client() as client:
+        map_id = client.upload_scenario(DATA / "example.json", map_id=0x53)
+    start_node(ros, daemon)
+    answer = ros.call(FindSensorPose, SERVICE, request(map_id, s))
+    assert answer.success
+    markers = ros.subscribe(MarkerArray, "/dyfos/markers", LATCHED)
+    ros.spin_until(lambda: markers, what="the markers of the answer given before")
+    sight = {m.id: m for m in markers[-1].markers}[1]
+    p = answer.sensor_pose.pose.position
+    assert [sight.points[0].x, sight.points[0].y, sight.points[0].z] == [p.x, p.y, p.z]
