@@ -80,9 +80,7 @@ class ServiceThread:
         self._client: Optional[dyfos.Client] = None
         self._logger = node.get_logger()
         self._context = node.context
-        self._service = node.create_service(
-            srv_type, name, self._never_called, callback_group=_NoExecutor()
-        )
+        self._service = node.create_service(srv_type, name, self._never_called, callback_group=_NoExecutor())
         self._name = self._service.service_name
         self._wake = GuardCondition(callback=None, callback_group=None, context=self._context)
         self._context.on_shutdown(self._wake_up)
