@@ -10,31 +10,23 @@
 //! assert_eq!(bad.validate().unwrap_err().to_string(), "rho_min = 7 must be < rho_max = 6");
 //! ```
 
+use crate::codes::codes;
 use crate::limits::{MAX_COORDINATE, MAX_PERIMETER_POINTS};
 use crate::math::Vector3;
 use std::f64::consts::{FRAC_PI_2, PI};
 
-/// Which SDSMM predicts the measurement noise (SPEC §6).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ModelKind {
-    /// The paper's isotropic linear model.
-    #[default]
-    Paper,
-    /// `paper`'s variance stretched along the line of sight.
-    Anisotropic,
-    /// A trained probabilistic neural network, loaded from a file.
-    Learned,
-}
-
-impl ModelKind {
-    /// The name used in scenario files.
-    pub fn name(self) -> &'static str {
-        match self {
-            ModelKind::Paper => "paper",
-            ModelKind::Anisotropic => "anisotropic",
-            ModelKind::Learned => "learned",
-        }
+codes! {
+    /// Which SDSMM predicts the measurement noise (SPEC §6); the name is the scenario
+    /// files' and the code the wire's `params.model`.
+    #[derive(Default)]
+    pub enum ModelKind("params.model", serde) {
+        /// The paper's isotropic linear model.
+        #[default]
+        Paper = 0, "paper";
+        /// `paper`'s variance stretched along the line of sight.
+        Anisotropic = 1, "anisotropic";
+        /// A trained probabilistic neural network, loaded from a file.
+        Learned = 2, "learned";
     }
 }
 

@@ -285,13 +285,10 @@ impl dyfos_rendezvous_request {
     pub(crate) unsafe fn decode(&self) -> Result<RendezvousRequest, Failure> {
         let belief = Belief::new(self.mean, self.cov)
             .map_err(|e| Failure::new(DYFOS_STATUS_INVALID_BELIEF, format!("belief: {e}")))?;
-        let algorithm = *Algorithm::ALL.get(self.algorithm as usize).ok_or_else(|| {
+        let algorithm = Algorithm::try_from(self.algorithm).map_err(|e| {
             Failure::new(
                 DYFOS_STATUS_INVALID_ALGORITHM,
-                format!(
-                    "algorithm = {} is not an algorithm (0 dyfos, 1 dyfos-scipy, 2 brute, 3 random, 4 center)",
-                    self.algorithm
-                ),
+                format!("algorithm = {} is not an algorithm ({})", e.value, Algorithm::listing()),
             )
         })?;
         let params = self.params.to_params()?;
@@ -414,22 +411,12 @@ impl From<&MapInfo> for dyfos_map_info {
     }
 }
 
-fn stop_code(s: StopReason) -> u32 {
-    match s {
-        StopReason::Finished => DYFOS_STOP_FINISHED,
-        StopReason::MaxGenerations => DYFOS_STOP_MAX_GENERATIONS,
-        StopReason::Budget => DYFOS_STOP_BUDGET,
-        StopReason::Deadline => DYFOS_STOP_DEADLINE,
-        StopReason::Abandoned => DYFOS_STOP_ABANDONED,
-    }
-}
-
 impl From<&Answer> for dyfos_answer {
     fn from(a: &Answer) -> Self {
         let e = a.evaluations;
         dyfos_answer {
-            algorithm: Algorithm::ALL.iter().position(|x| *x == a.algorithm).unwrap_or(0) as u32,
-            stop: stop_code(a.stop),
+            algorithm: a.algorithm.code(),
+            stop: a.stop.code(),
             map_version: a.map_version,
             x: a.x.to_array(),
             cost: a.cost,
@@ -454,17 +441,10 @@ impl dyfos_answer {
     /// Rebuilds the answer (for its JSON); codes written by the caller are checked.
     pub(crate) fn decode(&self) -> Result<Answer, Failure> {
         let a = self;
-        let algorithm = *Algorithm::ALL
-            .get(a.algorithm as usize)
-            .ok_or_else(|| Failure::invalid(format!("answer.algorithm = {} is not an algorithm", a.algorithm)))?;
-        let stop = match a.stop {
-            DYFOS_STOP_FINISHED => StopReason::Finished,
-            DYFOS_STOP_MAX_GENERATIONS => StopReason::MaxGenerations,
-            DYFOS_STOP_BUDGET => StopReason::Budget,
-            DYFOS_STOP_DEADLINE => StopReason::Deadline,
-            DYFOS_STOP_ABANDONED => StopReason::Abandoned,
-            s => return Err(Failure::invalid(format!("answer.stop = {s} is not a stop reason"))),
-        };
+        let algorithm = Algorithm::try_from(a.algorithm)
+            .map_err(|e| Failure::invalid(format!("answer.algorithm = {} is not an algorithm", e.value)))?;
+        let stop = StopReason::try_from(a.stop)
+            .map_err(|e| Failure::invalid(format!("answer.stop = {} is not a stop reason", e.value)))?;
         let [i, j, k, w] = a.sensor_quaternion;
         let e = a.evaluations;
         Ok(Answer {
@@ -550,6 +530,40 @@ pub(crate) unsafe fn c_str<'a>(ptr: *const c_char) -> Option<&'a CStr> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dyfos_shared::params::ModelKind;
+
+    /// The `#define PREFIX<NAME> <code>u` lines of the header (which the header test
+    /// keeps equal to cbindgen's output of this file's constants).
+    fn header_codes(prefix: &str) -> Vec<(String, u32)> {
+        let header = include_str!("../include/dyfos.h");
+        let mut out: Vec<(String, u32)> = header
+            .lines()
+            .filter_map(|l| l.strip_prefix("#define ")?.strip_prefix(prefix))
+            .filter_map(|rest| {
+                let (name, code) = rest.split_once(' ')?;
+                Some((name.to_string(), code.trim_end_matches('u').parse().ok()?))
+            })
+            .collect();
+        out.sort_by_key(|(_, code)| *code);
+        out
+    }
+
+    /// Each C constant is its set's wire code, named after it; none is missing or extra.
+    #[test]
+    fn c_codes_are_the_wire_codes() {
+        fn c_names(names: &[&str]) -> Vec<String> {
+            names.iter().map(|n| n.to_uppercase().replace('-', "_")).collect()
+        }
+        let sets: [(&str, Vec<String>, Vec<u32>); 3] = [
+            ("DYFOS_ALGORITHM_", c_names(Algorithm::NAMES), Algorithm::ALL.map(Algorithm::code).to_vec()),
+            ("DYFOS_MODEL_", c_names(ModelKind::NAMES), ModelKind::ALL.map(ModelKind::code).to_vec()),
+            ("DYFOS_STOP_", c_names(StopReason::NAMES), StopReason::ALL.map(StopReason::code).to_vec()),
+        ];
+        for (prefix, names, codes) in sets {
+            let expected: Vec<(String, u32)> = names.into_iter().zip(codes).collect();
+            assert_eq!(header_codes(prefix), expected, "{prefix}*");
+        }
+    }
 
     #[test]
     fn param_bits_follow_wire_params_fields() {

@@ -21,7 +21,7 @@
 
 pub mod replay;
 
-use dyfos_shared::answer::Algorithm;
+use dyfos_shared::answer::{Algorithm, StopReason};
 use dyfos_shared::params::{ModelKind, Params};
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::wire::Status;
@@ -331,16 +331,13 @@ pub struct RecordedReply {
     pub message: String,
 }
 
-/// The names of [`RendezvousReply::stop`] codes.
-const STOPS: [&str; 5] = ["finished", "max_generations", "budget", "deadline", "abandoned"];
-
 impl RecordedReply {
     /// The reply as sent.
     pub fn of(r: &RendezvousReply) -> Self {
         RecordedReply {
             status: Status::try_from(r.status).map_or_else(|_| format!("status_{}", r.status), |s| s.name().into()),
-            algorithm: Algorithm::ALL.get(r.algorithm as usize).map_or("?", |a| a.name()).to_string(),
-            stop: STOPS.get(r.stop as usize).copied().unwrap_or("?").to_string(),
+            algorithm: Algorithm::try_from(r.algorithm).map_or("?", Algorithm::name).to_string(),
+            stop: StopReason::try_from(r.stop).map_or("?", StopReason::name).to_string(),
             map_version: r.map_version,
             x: r.x,
             cost: r.cost,

@@ -34,6 +34,7 @@
 use super::map::{MapId, WireDelta, decode_batch, encode_deltas};
 use super::{ANY_VERSION, Detail, Rejection, Status};
 use crate::answer::{Algorithm, Answer, EvalStats, StopReason};
+use crate::codes::codes;
 use crate::limits::{MAX_DEADLINE_MICROS, MAX_INLINE_DELTAS};
 use crate::math::{Matrix3, Point3, UnitQuaternion, Vector3};
 use crate::params::{ModelKind, Params};
@@ -42,15 +43,16 @@ use crate::world::MapDelta;
 use iceoryx2::prelude::ZeroCopySend;
 use std::time::Duration;
 
-/// What the daemon does with a valid request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Mode {
-    /// Search and answer.
-    Solve = 0,
-    /// Validate everything (map, version, belief, parameters, inline deltas on a
-    /// copy of the map) and answer at once without searching or changing the map:
-    /// the round-trip floor, for latency benchmarks and health checks.
-    Check = 1,
+codes! {
+    /// What the daemon does with a valid request; the code is the header's `mode`.
+    pub enum Mode("mode") {
+        /// Search and answer.
+        Solve = 0, "solve";
+        /// Validate everything (map, version, belief, parameters, inline deltas on a
+        /// copy of the map) and answer at once without searching or changing the map:
+        /// the round-trip floor, for latency benchmarks and health checks.
+        Check = 1, "check";
+    }
 }
 
 /// Every parameter of SPEC §11, as plain numbers. `model`: 0 paper, 1 anisotropic,
@@ -167,11 +169,7 @@ impl From<&Params> for WireParams {
             kappa: p.kappa,
             lambda: p.lambda,
             perimeter_points: p.perimeter_points,
-            model: match p.model {
-                ModelKind::Paper => 0,
-                ModelKind::Anisotropic => 1,
-                ModelKind::Learned => 2,
-            },
+            model: p.model.code(),
             set: WireParams::ALL_SET,
             reserved: 0,
         }
@@ -223,17 +221,12 @@ impl TryFrom<&WireParams> for Params {
             perimeter_points,
             model
         );
-        let model = match w.model {
-            0 => ModelKind::Paper,
-            1 => ModelKind::Anisotropic,
-            2 => ModelKind::Learned,
-            m => {
-                return Err(Rejection::new(
-                    Status::InvalidParams,
-                    format!("params.model = {m} is not a model (0 paper, 1 anisotropic, 2 learned)"),
-                ));
-            }
-        };
+        let model = ModelKind::try_from(w.model).map_err(|e| {
+            Rejection::new(
+                Status::InvalidParams,
+                format!("params.model = {} is not a model ({})", e.value, ModelKind::listing()),
+            )
+        })?;
         let p = Params {
             rover_radius: w.rover_radius,
             perimeter_points: w.perimeter_points,
@@ -336,7 +329,6 @@ impl RendezvousRequest {
 
     /// The header to send.
     pub fn header(&self, mode: Mode, request_id: u64, reply_to: [u64; 2]) -> RendezvousRequestHeader {
-        let index = Algorithm::ALL.iter().position(|a| *a == self.algorithm).expect("every algorithm has a tag");
         RendezvousRequestHeader {
             request_id,
             map_id: self.map,
@@ -347,8 +339,8 @@ impl RendezvousRequest {
             mean: self.belief.mean.into(),
             cov: self.belief.cov.to_rows(),
             params: WireParams::from(&self.params),
-            algorithm: index as u32,
-            mode: mode as u32,
+            algorithm: self.algorithm.code(),
+            mode: mode.code(),
             reply_to,
         }
     }
@@ -361,23 +353,14 @@ impl RendezvousRequest {
     /// Decodes and validates every field; the map-dependent checks (id, version,
     /// deltas applying cleanly) are the daemon's.
     pub fn decode(h: &RendezvousRequestHeader, records: &[WireDelta]) -> Result<(Self, Mode), Rejection> {
-        let mode = match h.mode {
-            0 => Mode::Solve,
-            1 => Mode::Check,
-            m => {
-                return Err(Rejection::new(
-                    Status::MalformedRequest,
-                    format!("mode = {m} must be 0 (solve) or 1 (check)"),
-                ));
-            }
-        };
-        let algorithm = *Algorithm::ALL.get(h.algorithm as usize).ok_or_else(|| {
+        let mode = Mode::try_from(h.mode).map_err(|e| {
+            let codes: Vec<String> = Mode::ALL.iter().map(|m| format!("{} ({m})", m.code())).collect();
+            Rejection::new(Status::MalformedRequest, format!("mode = {} must be {}", e.value, codes.join(" or ")))
+        })?;
+        let algorithm = Algorithm::try_from(h.algorithm).map_err(|e| {
             Rejection::new(
                 Status::InvalidAlgorithm,
-                format!(
-                    "algorithm = {} is not an algorithm (0 dyfos, 1 dyfos-scipy, 2 brute, 3 random, 4 center)",
-                    h.algorithm
-                ),
+                format!("algorithm = {} is not an algorithm ({})", e.value, Algorithm::listing()),
             )
         })?;
         let belief =
@@ -466,16 +449,6 @@ pub struct RendezvousReply {
     pub detail: Detail,
 }
 
-fn stop_code(s: StopReason) -> u32 {
-    match s {
-        StopReason::Finished => 0,
-        StopReason::MaxGenerations => 1,
-        StopReason::Budget => 2,
-        StopReason::Deadline => 3,
-        StopReason::Abandoned => 4,
-    }
-}
-
 /// The outcome of a check-mode request: everything validated, nothing searched.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RendezvousCheck {
@@ -490,9 +463,9 @@ impl RendezvousReply {
         let e = answer.evaluations;
         RendezvousReply {
             status: Status::Ok as u32,
-            algorithm: Algorithm::ALL.iter().position(|a| *a == answer.algorithm).unwrap_or(0) as u32,
-            stop: stop_code(answer.stop),
-            mode: Mode::Solve as u32,
+            algorithm: answer.algorithm.code(),
+            stop: answer.stop.code(),
+            mode: Mode::Solve.code(),
             request_id,
             map_version: answer.map_version,
             x: answer.x.to_array(),
@@ -515,7 +488,7 @@ impl RendezvousReply {
     pub fn checked(request_id: u64, map_version: u64) -> Self {
         RendezvousReply {
             status: Status::Ok as u32,
-            mode: Mode::Check as u32,
+            mode: Mode::Check.code(),
             request_id,
             map_version,
             error_index: u64::MAX,
@@ -549,17 +522,8 @@ impl RendezvousReply {
             return Err(self.rejection());
         }
         let bad = |what: String| Rejection::new(Status::MalformedRequest, format!("malformed reply: {what}"));
-        let algorithm = *Algorithm::ALL
-            .get(self.algorithm as usize)
-            .ok_or_else(|| bad(format!("algorithm = {}", self.algorithm)))?;
-        let stop = match self.stop {
-            0 => StopReason::Finished,
-            1 => StopReason::MaxGenerations,
-            2 => StopReason::Budget,
-            3 => StopReason::Deadline,
-            4 => StopReason::Abandoned,
-            s => return Err(bad(format!("stop = {s}"))),
-        };
+        let algorithm = Algorithm::try_from(self.algorithm).map_err(|e| bad(format!("algorithm = {}", e.value)))?;
+        let stop = StopReason::try_from(self.stop).map_err(|e| bad(format!("stop = {}", e.value)))?;
         let [i, j, k, w] = self.sensor_quaternion;
         let e = self.evaluations;
         Ok(Answer {
