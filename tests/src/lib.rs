@@ -19,6 +19,7 @@ pub mod soak;
 use dyfos_client::{Client, ClientConfig};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
@@ -33,15 +34,49 @@ pub fn bin_dir() -> PathBuf {
     deps.parent().expect("target profile dir").to_path_buf()
 }
 
-/// A workspace binary (`dyfosd`, `dyfos`) or, with `examples/` in front, an example.
+/// A workspace binary (`dyfosd`, `dyfos`, `dyfos-rover`, …) or, with `examples/` in
+/// front, an example. The first call in a test process builds the workspace's
+/// targets if they are missing (see [`build_binaries`]), so `cargo test` needs no
+/// build before it.
 pub fn bin(name: &str) -> PathBuf {
+    static BUILT: OnceLock<Result<(), String>> = OnceLock::new();
+    if let Err(e) = BUILT.get_or_init(build_binaries) {
+        panic!("{e}");
+    }
     let path = bin_dir().join(name);
-    assert!(
-        path.exists(),
-        "{} is missing: run `cargo build --workspace --all-targets` before `cargo test`",
-        path.display()
-    );
+    assert!(path.exists(), "{} is missing after building the workspace", path.display());
     path
+}
+
+/// Builds the workspace's targets with the cargo running the tests (`CARGO`), into
+/// the target directory and profile of the running test executable: tests need
+/// other packages' binaries, which cargo builds for a test only in its own package
+/// (`CARGO_BIN_EXE_*`; depending on another package's binary is unstable). One
+/// `--workspace --all-targets` build rather than one per binary (as escargot does):
+/// it resolves features as `cargo test --workspace` does (`--bins` alone resolves
+/// others and compiles the tree again), so after that or after
+/// `cargo build --workspace --all-targets` it only checks that all is fresh.
+fn build_binaries() -> Result<(), String> {
+    let profile_dir = bin_dir();
+    let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
+        Some("debug") => "dev".to_string(),
+        Some(name) => name.to_string(),
+        None => return Err(format!("{} is not a cargo profile directory", profile_dir.display())),
+    };
+    let parent = profile_dir.parent().ok_or("the target directory")?;
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let mut cmd = Command::new(cargo);
+    cmd.args(["build", "--quiet", "--workspace", "--all-targets", "--profile", &profile]);
+    // `target/<triple>/<profile>` when the tests were built with `--target`.
+    if parent.join("CACHEDIR.TAG").exists() {
+        cmd.arg("--target-dir").arg(parent);
+    } else {
+        let triple = parent.file_name().and_then(|n| n.to_str()).ok_or("the target triple")?;
+        cmd.args(["--target", triple]).arg("--target-dir").arg(parent.parent().ok_or("the target directory")?);
+    }
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).parent().ok_or("the workspace directory")?;
+    let status = cmd.current_dir(workspace).status().map_err(|e| format!("cannot run {cmd:?}: {e}"))?;
+    if status.success() { Ok(()) } else { Err(format!("{cmd:?} failed ({status}); its errors are above")) }
 }
 
 /// Polls `done` until it returns `Some`, panicking with `what` after [`PATIENCE`].

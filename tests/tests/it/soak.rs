@@ -11,7 +11,7 @@
 //!
 //! ```text
 //! DYFOS_SOAK_SECS=1800 DYFOS_SOAK_REPORT=/tmp/soak.json \
-//!     cargo test -p dyfos-tests --test soak -- --nocapture
+//!     cargo test -p dyfos-tests --test it soak:: -- --nocapture
 //! ```
 //!
 //! Environment: `DYFOS_SOAK_SECS` (duration, default 20), `DYFOS_SOAK_CLIENTS`
