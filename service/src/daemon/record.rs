@@ -22,7 +22,7 @@
 pub mod replay;
 
 use dyfos_shared::answer::{Algorithm, StopReason};
-use dyfos_shared::params::{ModelKind, Params};
+use dyfos_shared::params::Params;
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::wire::Status;
 use dyfos_shared::wire::map::{MapId, world_from_content};
@@ -198,15 +198,7 @@ pub(crate) fn unix_ns_of(since: Instant) -> u64 {
 /// Every SPEC §11 parameter by its scenario name (what
 /// [`dyfos_shared::scenario::params_from_json`] reads back, bit for bit).
 pub fn params_to_json(p: &Params) -> serde_json::Value {
-    serde_json::json!({
-        "rover_radius": p.rover_radius, "perimeter_points": p.perimeter_points,
-        "marker_size": p.marker_size, "marker_height": p.marker_height,
-        "viewer_radius": p.viewer_radius, "safety_margin": p.safety_margin,
-        "z_min": p.z_min, "z_max": p.z_max, "camera_pitch": p.camera_pitch,
-        "t_vs": [p.t_vs.x, p.t_vs.y, p.t_vs.z], "f_h": p.f_h, "f_v": p.f_v,
-        "rho_min": p.rho_min, "rho_max": p.rho_max, "kappa": p.kappa, "lambda": p.lambda,
-        "model": match p.model { ModelKind::Paper => "paper", ModelKind::Anisotropic => "anisotropic", ModelKind::Learned => "learned" },
-    })
+    dyfos_shared::scenario::params_to_json(p)
 }
 
 /// A rendezvous request as recorded: the decoded, validated request.
@@ -952,6 +944,7 @@ impl Writer {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dyfos_shared::params::ModelKind;
     use dyfos_shared::world::{Obstacle, VerticalCylinder};
 
     /// Awkward numbers: no short decimal form, the smallest subnormal, -0.

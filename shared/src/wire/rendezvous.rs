@@ -36,8 +36,8 @@ use super::{ANY_VERSION, Detail, Rejection, Status};
 use crate::answer::{Algorithm, Answer, EvalStats, StopReason};
 use crate::codes::codes;
 use crate::limits::{MAX_DEADLINE_MICROS, MAX_INLINE_DELTAS};
-use crate::math::{Matrix3, Point3, UnitQuaternion, Vector3};
-use crate::params::{ModelKind, Params};
+use crate::math::{Matrix3, Point3, UnitQuaternion};
+use crate::params::{ParamValue, Params};
 use crate::posterior::Belief;
 use crate::world::MapDelta;
 use iceoryx2::prelude::ZeroCopySend;
@@ -119,136 +119,81 @@ pub struct WireParams {
     pub reserved: u32,
 }
 
-impl WireParams {
-    /// The fields' SPEC §11 names, in field order: bit `i` of `set` is `FIELDS[i]`.
-    pub const FIELDS: [&'static str; 17] = [
-        "rover_radius",
-        "marker_size",
-        "marker_height",
-        "viewer_radius",
-        "safety_margin",
-        "z_min",
-        "z_max",
-        "camera_pitch",
-        "t_vs",
-        "f_h",
-        "f_v",
-        "rho_min",
-        "rho_max",
-        "kappa",
-        "lambda",
-        "perimeter_points",
-        "model",
-    ];
+macro_rules! wire_params {
+    ($($(#[doc = $doc:literal])* #[wire($slot:literal)] $name:ident: $ty:ty = $default:expr,)*) => {
+        impl WireParams {
+            /// The fields' SPEC §11 names, in field order: bit `i` of `set` is `FIELDS[i]`.
+            pub const FIELDS: [&'static str; [$(stringify!($name)),*].len()] = {
+                let mut fields = [""; [$(stringify!($name)),*].len()];
+                $(fields[$slot] = stringify!($name);)*
+                fields
+            };
+        }
 
+        // The struct above is the one place that restates the parameters (its
+        // layout is the ABI): its fields must be in `#[wire(i)]` order.
+        const _: () = {
+            let mut offsets = [0usize; WireParams::FIELDS.len()];
+            $(offsets[$slot] = std::mem::offset_of!(WireParams, $name);)*
+            let mut i = 1;
+            while i < offsets.len() {
+                assert!(offsets[i - 1] < offsets[i], "WireParams's fields are not in #[wire(i)] order");
+                i += 1;
+            }
+        };
+
+        impl From<&Params> for WireParams {
+            fn from(p: &Params) -> Self {
+                WireParams { $($name: ParamValue::to_wire(p.$name),)* set: WireParams::ALL_SET, reserved: 0 }
+            }
+        }
+
+        impl TryFrom<&WireParams> for Params {
+            type Error = Rejection;
+
+            /// Decodes and validates (SPEC §11 ranges): `invalid_params` names the field.
+            /// Fields whose `set` bit is clear take the SPEC default.
+            fn try_from(w: &WireParams) -> Result<Self, Rejection> {
+                if w.set & !WireParams::ALL_SET != 0 || w.reserved != 0 {
+                    return Err(Rejection::new(
+                        Status::InvalidParams,
+                        format!(
+                            "params.set = {:#x} has bits above {:#x}, or params.reserved = {} is not 0",
+                            w.set,
+                            WireParams::ALL_SET,
+                            w.reserved
+                        ),
+                    ));
+                }
+                // Unset fields take their default before anything is decoded, so their
+                // bits (whatever a peer left there) are never looked at.
+                let d = WireParams::from(&Params::default());
+                let given = |name: &str| w.set & WireParams::bit(name).unwrap_or(0) != 0;
+                let invalid = |message: String| Rejection::new(Status::InvalidParams, message);
+                let p = Params {
+                    $($name: ParamValue::from_wire(
+                        concat!("params.", stringify!($name)),
+                        if given(stringify!($name)) { w.$name } else { d.$name },
+                    )
+                    .map_err(invalid)?,)*
+                };
+                // A pair out of order names the field the request gave, not a default.
+                p.validate_given(given).map_err(|e| invalid(format!("params.{e}")))?;
+                Ok(p)
+            }
+        }
+    };
+}
+
+crate::spec_params!(wire_params);
+
+impl WireParams {
     /// `set` with every field given.
     pub const ALL_SET: u32 = (1 << Self::FIELDS.len()) - 1;
 
     /// The `set` bit of the field named `name` (SPEC §11 name), if there is one.
     pub fn bit(name: &str) -> Option<u32> {
         Self::FIELDS.iter().position(|f| *f == name).map(|i| 1 << i)
-    }
-}
-
-impl From<&Params> for WireParams {
-    fn from(p: &Params) -> Self {
-        WireParams {
-            rover_radius: p.rover_radius,
-            marker_size: p.marker_size,
-            marker_height: p.marker_height,
-            viewer_radius: p.viewer_radius,
-            safety_margin: p.safety_margin,
-            z_min: p.z_min,
-            z_max: p.z_max,
-            camera_pitch: p.camera_pitch,
-            t_vs: p.t_vs.into(),
-            f_h: p.f_h,
-            f_v: p.f_v,
-            rho_min: p.rho_min,
-            rho_max: p.rho_max,
-            kappa: p.kappa,
-            lambda: p.lambda,
-            perimeter_points: p.perimeter_points,
-            model: p.model.code(),
-            set: WireParams::ALL_SET,
-            reserved: 0,
-        }
-    }
-}
-
-impl TryFrom<&WireParams> for Params {
-    type Error = Rejection;
-
-    /// Decodes and validates (SPEC §11 ranges): `invalid_params` names the field.
-    /// Fields whose `set` bit is clear take the SPEC default.
-    fn try_from(w: &WireParams) -> Result<Self, Rejection> {
-        if w.set & !WireParams::ALL_SET != 0 || w.reserved != 0 {
-            return Err(Rejection::new(
-                Status::InvalidParams,
-                format!(
-                    "params.set = {:#x} has bits above {:#x}, or params.reserved = {} is not 0",
-                    w.set,
-                    WireParams::ALL_SET,
-                    w.reserved
-                ),
-            ));
-        }
-        // Unset fields take their default before anything is decoded, so their
-        // bits (whatever a peer left there) are never looked at.
-        let d = WireParams::from(&Params::default());
-        let given = |name: &str| w.set & WireParams::bit(name).unwrap_or(0) != 0;
-        macro_rules! pick {
-            ($($field:ident),*) => {
-                WireParams { $($field: if given(stringify!($field)) { w.$field } else { d.$field },)* set: w.set, reserved: 0 }
-            };
-        }
-        let w = &pick!(
-            rover_radius,
-            marker_size,
-            marker_height,
-            viewer_radius,
-            safety_margin,
-            z_min,
-            z_max,
-            camera_pitch,
-            t_vs,
-            f_h,
-            f_v,
-            rho_min,
-            rho_max,
-            kappa,
-            lambda,
-            perimeter_points,
-            model
-        );
-        let model = ModelKind::try_from(w.model).map_err(|e| {
-            Rejection::new(
-                Status::InvalidParams,
-                format!("params.model = {} is not a model ({})", e.value, ModelKind::listing()),
-            )
-        })?;
-        let p = Params {
-            rover_radius: w.rover_radius,
-            perimeter_points: w.perimeter_points,
-            marker_size: w.marker_size,
-            marker_height: w.marker_height,
-            viewer_radius: w.viewer_radius,
-            safety_margin: w.safety_margin,
-            z_min: w.z_min,
-            z_max: w.z_max,
-            camera_pitch: w.camera_pitch,
-            t_vs: Vector3::from(w.t_vs),
-            f_h: w.f_h,
-            f_v: w.f_v,
-            rho_min: w.rho_min,
-            rho_max: w.rho_max,
-            kappa: w.kappa,
-            lambda: w.lambda,
-            model,
-        };
-        // A pair out of order names the field the request gave, not a default.
-        p.validate_given(given).map_err(|e| Rejection::new(Status::InvalidParams, format!("params.{e}")))?;
-        Ok(p)
     }
 }
 
@@ -556,6 +501,8 @@ impl RendezvousReply {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::Vector3;
+    use crate::params::ModelKind;
     use crate::world::Sun;
 
     fn request() -> RendezvousRequest {
