@@ -17,8 +17,9 @@ pub mod mission;
 pub mod soak;
 
 use dyfos_client::{Client, ClientConfig};
+use dyfos_service::launch::DyfosdCommand;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Command, ExitStatus};
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
@@ -152,18 +153,15 @@ impl Sandbox {
     pub fn start_daemon_logging(&self, level: &str, extra: &[&str]) -> DaemonProcess {
         let log = self.state_dir.with_extension(format!("log-{}", NEXT.fetch_add(1, Ordering::Relaxed)));
         let log_file = std::fs::File::create(&log).expect("daemon log file");
-        let child = Command::new(bin("dyfosd"))
-            .args(["--prefix", &self.prefix, "--domain", &self.domain, "--state-dir"])
-            .arg(&self.state_dir)
+        let child = DyfosdCommand::new(&bin("dyfosd"), &self.prefix, &self.state_dir)
+            .domain(&self.domain)
+            .log(level, log_file)
             .args(extra)
-            .env("RUST_LOG", level)
-            .stdout(Stdio::null())
-            .stderr(log_file)
             .spawn()
             .expect("start dyfosd");
-        let mut daemon = DaemonProcess { child: Some(child), log };
+        let mut daemon = DaemonProcess { child, log };
         let mut client = wait_for("dyfosd to serve", || {
-            if let Some(status) = daemon.try_status() {
+            if let Some(status) = daemon.child.try_wait() {
                 panic!("dyfosd exited at start ({status}):\n{}", daemon.log());
             }
             Client::connect(&ClientConfig { connect_timeout: Duration::from_millis(50), ..self.client_config() }).ok()
@@ -249,14 +247,14 @@ impl Drop for Sandbox {
 /// A running `dyfosd`, killed (SIGKILL) when dropped.
 #[derive(Debug)]
 pub struct DaemonProcess {
-    child: Option<Child>,
+    child: KillOnDrop,
     log: PathBuf,
 }
 
 impl DaemonProcess {
     /// The process id.
     pub fn pid(&self) -> u32 {
-        self.child.as_ref().map_or(0, Child::id)
+        self.child.id()
     }
 
     /// Its log so far.
@@ -264,16 +262,9 @@ impl DaemonProcess {
         std::fs::read_to_string(&self.log).unwrap_or_default()
     }
 
-    fn try_status(&mut self) -> Option<ExitStatus> {
-        self.child.as_mut().and_then(|c| c.try_wait().ok().flatten())
-    }
-
     /// SIGKILL, and reap.
     pub fn kill9(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
+        self.child.kill();
     }
 
     /// SIGTERM, then waits for the exit.
@@ -284,14 +275,12 @@ impl DaemonProcess {
     /// Sends `signal_name` (`TERM`, `INT`), then waits for the exit.
     pub fn stop_with(&mut self, signal_name: &str) -> ExitStatus {
         signal(self.pid(), signal_name);
-        let status = wait_for(&format!("dyfosd to exit after SIG{signal_name}"), || self.try_status());
-        self.child = None;
-        status
+        wait_for(&format!("dyfosd to exit after SIG{signal_name}"), || self.child.try_wait())
     }
 
     /// Whether the process has not exited.
     pub fn is_running(&mut self) -> bool {
-        self.child.is_some() && self.try_status().is_none()
+        self.child.is_running()
     }
 }
 
@@ -314,16 +303,7 @@ pub fn signal(pid: u32, name: &str) {
     assert!(ok, "kill -{name} {pid} failed");
 }
 
-/// A child process killed when dropped.
-#[derive(Debug)]
-pub struct ChildGuard(pub Child);
-
-impl Drop for ChildGuard {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+pub use dyfos_process::child::KillOnDrop;
 
 /// The workspace's test data directory.
 pub fn data(path: &str) -> PathBuf {

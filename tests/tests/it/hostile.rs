@@ -679,7 +679,7 @@ fn a_misbehaving_client_cannot_flood_the_daemons_log() {
                     scope.spawn(move || c.rendezvous(&brute, PATIENCE).map(|_| ()))
                 })
                 .collect();
-            let mut child = dyfos_tests::ChildGuard(
+            let mut child = dyfos_tests::KillOnDrop::new(
                 std::process::Command::new(bin("hang-after-query"))
                     .args([&sandbox.prefix, &sandbox.domain, "1"])
                     .arg(data("example.json"))
@@ -689,11 +689,10 @@ fn a_misbehaving_client_cannot_flood_the_daemons_log() {
                     .unwrap(),
             );
             let mut line = String::new();
-            let stdout = child.0.stdout.take().unwrap();
+            let stdout = child.child_mut().and_then(|c| c.stdout.take()).unwrap();
             std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut line).unwrap();
             assert_eq!(line.trim(), "sent");
-            let _ = child.0.kill();
-            let _ = child.0.wait();
+            child.kill();
             killed += 1;
             for b in busy {
                 b.join().unwrap().unwrap();
