@@ -3,19 +3,15 @@
 //! their samples, and stops the daemon cleanly. No timing is asserted; the numbers
 //! are in `bench/RESULTS.md`.
 //!
-//! Needs `dyfosd` built next to `dyfos-bench` (`cargo build --workspace --bins`).
+//! `dyfos-bench` starts the `dyfosd` built next to it (`dyfos_tests::bin` builds it
+//! if it is missing).
 
 use std::process::Command;
 
 #[test]
 fn latency_command_smoke_run() {
     let exe = std::path::PathBuf::from(env!("CARGO_BIN_EXE_dyfos-bench"));
-    let dyfosd = exe.with_file_name("dyfosd");
-    assert!(
-        dyfosd.exists(),
-        "{} is missing: run `cargo build --workspace --bins` before `cargo test`",
-        dyfosd.display()
-    );
+    assert_eq!(dyfos_tests::bin("dyfosd"), exe.with_file_name("dyfosd"), "dyfosd is built next to dyfos-bench");
     let out = std::env::temp_dir().join(format!("dyfos-bench-latency-smoke-{}", std::process::id()));
     let output = Command::new(&exe)
         .args(["latency", "--seconds", "0.2", "--clients", "1,2", "--open-clients", "2", "--maps", "2"])

@@ -24,13 +24,15 @@ use dyfos_mission::eval::{ApeStats, McapMission, McapProfile, MissionTrace, Reco
 use dyfos_mission::mission::Mission;
 use dyfos_mission::mission::log::read_events;
 use dyfos_mission::mission::topics::TopicsConfig;
+use dyfos_process::child::KillOnDrop;
 use dyfos_process::shutdown;
+use dyfos_service::launch::DyfosdCommand;
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::params::ModelKind;
 use dyfos_shared::wire::mission::Observation;
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Flags of `dyfos demo`.
@@ -123,53 +125,39 @@ impl Binaries {
 /// A child process stopped when dropped: SIGTERM, a grace period, then SIGKILL.
 struct Proc {
     name: String,
-    child: Option<Child>,
+    child: KillOnDrop,
 }
 
 impl Proc {
     fn spawn(name: &str, cmd: &mut Command, log: &Path) -> anyhow::Result<Proc> {
         let file = std::fs::File::create(log).with_context(|| format!("cannot create {}", log.display()))?;
-        let child = cmd
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(file)
-            .spawn()
+        let child = KillOnDrop::spawn(cmd.stdin(Stdio::null()).stdout(Stdio::null()).stderr(file))
             .with_context(|| format!("cannot start {name}"))?;
-        Ok(Proc { name: name.to_string(), child: Some(child) })
+        Ok(Proc { name: name.to_string(), child })
     }
 
     /// `Some(success)` once it has exited.
     fn exited(&mut self) -> Option<bool> {
-        let c = self.child.as_mut()?;
-        match c.try_wait() {
-            Ok(Some(status)) => {
-                self.child = None;
-                Some(status.success())
-            }
-            Ok(None) => None,
-            Err(_) => Some(false),
-        }
+        self.child.try_wait().map(|status| status.success())
     }
 
-    fn running(&self) -> bool {
-        self.child.is_some()
+    /// Whether it has not been seen to exit.
+    fn running(&mut self) -> bool {
+        self.child.child_mut().is_some()
     }
 
     /// SIGTERM, up to `grace` to exit, then SIGKILL. Returns whether it exited cleanly.
     fn stop(&mut self, grace: Duration) -> bool {
-        let Some(mut c) = self.child.take() else { return true };
-        shutdown::terminate(c.id());
-        let start = Instant::now();
-        while start.elapsed() < grace {
-            if let Ok(Some(status)) = c.try_wait() {
-                return status.success();
-            }
-            std::thread::sleep(Duration::from_millis(10));
+        if !self.running() {
+            return true;
         }
-        tracing::warn!("{} did not stop within {grace:?}; killing it", self.name);
-        let _ = c.kill();
-        let _ = c.wait();
-        false
+        match self.child.terminate(grace) {
+            Some(status) => status.success(),
+            None => {
+                tracing::warn!("{} did not stop within {grace:?}; it was killed", self.name);
+                false
+            }
+        }
     }
 }
 
@@ -228,7 +216,7 @@ impl Demo<'_> {
                 (&h.rover, "rover", Some(h.rover_domain.as_str()), ["--listen", "tcp/0.0.0.0:7447"]),
                 (&h.viewer, "viewer", None, ["--connect", ROVER_ENDPOINT]),
             ] {
-                let mut cmd = h.command(ns, link);
+                let mut cmd = ns.command(link);
                 cmd.args(["--side", side, "--prefix", &self.prefix, "--mission-name", &name])
                     .args(endpoint)
                     .arg("--credentials")
@@ -245,7 +233,7 @@ impl Demo<'_> {
             Arm::DeadReckoning => None,
             Arm::Viewer(algo) => {
                 let mut cmd = match two {
-                    Some(h) => h.command(&h.viewer, &self.bins.viewer),
+                    Some(h) => h.viewer.command(&self.bins.viewer),
                     None => Command::new(&self.bins.viewer),
                 };
                 common(&mut cmd);
@@ -260,7 +248,7 @@ impl Demo<'_> {
         };
         let mut cmd = match two {
             Some(h) => {
-                let mut cmd = h.command(&h.rover, &self.bins.rover);
+                let mut cmd = h.rover.command(&self.bins.rover);
                 cmd.args(["--domain", &h.rover_domain]);
                 cmd
             }
@@ -354,13 +342,13 @@ fn tail(log: &Path) -> String {
 }
 
 fn start_daemon(bins: &Binaries, prefix: &str, state: &Path, model: Option<&Path>, log: &Path) -> anyhow::Result<Proc> {
-    let mut cmd = Command::new(&bins.dyfosd);
-    cmd.args(["--prefix", prefix]).arg("--state-dir").arg(state);
-    if let Some(m) = model {
-        cmd.arg("--model").arg(m);
-    }
-    cmd.env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()));
-    let mut daemon = Proc::spawn("dyfosd", &mut cmd, log)?;
+    let file = std::fs::File::create(log).with_context(|| format!("cannot create {}", log.display()))?;
+    let child = DyfosdCommand::new(&bins.dyfosd, prefix, state)
+        .log(&std::env::var("RUST_LOG").unwrap_or_else(|_| "info".into()), file)
+        .args(model.into_iter().flat_map(|m| [std::ffi::OsStr::new("--model"), m.as_os_str()]))
+        .spawn()
+        .context("cannot start dyfosd")?;
+    let mut daemon = Proc { name: "dyfosd".into(), child };
     let config = ClientConfig {
         prefix: prefix.to_string(),
         connect_timeout: Duration::from_millis(100),

@@ -4,7 +4,7 @@
 # which compile the examples and check programs and run them against a real dyfosd.
 # Idempotent; fast when everything is there. Run from anywhere.
 #
-#   client/ffi/test.sh            # build the daemon and CLI, then cargo test -p dyfos-ffi
+#   client/ffi/test.sh            # cargo test -p dyfos-ffi (its tests build dyfosd and dyfos if missing)
 #   client/ffi/test.sh --deps     # only install the system tools (before `cargo test --workspace`)
 #   client/ffi/test.sh --cmake    # also install cmake and test the CMake package (slower)
 set -euo pipefail
@@ -21,7 +21,6 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 [ "${1:-}" = "--deps" ] && exit 0
 cd "$here/../.."
-cargo build -p dyfos-service -p dyfos-cli --bins
 cargo test -p dyfos-ffi
 if [ "${1:-}" = "--cmake" ]; then
   cargo test -p dyfos-ffi --test c_and_cpp -- --ignored the_cmake_package_finds_the_library

@@ -8,6 +8,8 @@
 //! - [`idle`]: whether the machine has a core to spare, for the wait strategies of
 //!   the daemon and the client;
 //! - [`shutdown`]: Ctrl-C and SIGTERM noticed and latched, never fatal;
+//! - [`child`]: a child process killed when its owner lets go of it;
+//! - [`netns`]: network namespaces standing for hosts on one machine (Linux);
 //! - [`logging`] (feature `logging`): the log on stderr, with its flood limit;
 //! - [`cli`] (feature `cli`): the conventions every dyfos command line keeps.
 //!
@@ -20,9 +22,12 @@
 // the one iceoryx2 would give it.
 extern crate iceoryx2_bb_loggers as _;
 
+pub mod child;
 #[cfg(feature = "cli")]
 pub mod cli;
 pub mod idle;
 #[cfg(feature = "logging")]
 pub mod logging;
+#[cfg(target_os = "linux")]
+pub mod netns;
 pub mod shutdown;

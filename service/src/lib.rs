@@ -15,6 +15,7 @@
 //! ```
 
 pub mod daemon;
+pub mod launch;
 pub mod learned;
 pub mod lupp;
 pub mod search;

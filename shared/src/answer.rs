@@ -2,50 +2,24 @@
 //! candidate x, the predicted noise R, the posterior Σ⁺ and its cost E, and how
 //! the search got there.
 
+use crate::codes::codes;
 use crate::math::{Matrix3, Point3, UnitQuaternion, canonical_xyzw, rows3};
 use crate::sensor::SensorState;
 
-/// The search algorithms of SPEC §8.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Algorithm {
-    /// Differential evolution (the DyFOS optimizer), with a final local polish.
-    Dyfos,
-    /// Differential evolution exactly as SciPy's defaults, no polish (the paper's).
-    DyfosScipy,
-    /// Exhaustive grid on all cores.
-    Brute,
-    /// Uniform samples until the first feasible one.
-    Random,
-    /// Rover in the image centre, uniform ρ and yaw until the first feasible one.
-    Center,
-}
-
-impl Algorithm {
-    /// Every algorithm, in wire-tag order.
-    pub const ALL: [Algorithm; 5] =
-        [Algorithm::Dyfos, Algorithm::DyfosScipy, Algorithm::Brute, Algorithm::Random, Algorithm::Center];
-
-    /// The command-line and JSON name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Algorithm::Dyfos => "dyfos",
-            Algorithm::DyfosScipy => "dyfos-scipy",
-            Algorithm::Brute => "brute",
-            Algorithm::Random => "random",
-            Algorithm::Center => "center",
-        }
-    }
-
-    /// The algorithm with this name.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|a| a.name() == name)
-    }
-}
-
-impl std::fmt::Display for Algorithm {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
+codes! {
+    /// The search algorithms of SPEC §8; the code is the wire's `algorithm` tag, the
+    /// name the command-line and JSON one.
+    pub enum Algorithm("algorithm", serde) {
+        /// Differential evolution (the DyFOS optimizer), with a final local polish.
+        Dyfos = 0, "dyfos";
+        /// Differential evolution exactly as SciPy's defaults, no polish (the paper's).
+        DyfosScipy = 1, "dyfos-scipy";
+        /// Exhaustive grid on all cores.
+        Brute = 2, "brute";
+        /// Uniform samples until the first feasible one.
+        Random = 3, "random";
+        /// Rover in the image centre, uniform ρ and yaw until the first feasible one.
+        Center = 4, "center";
     }
 }
 
@@ -78,21 +52,21 @@ impl std::ops::AddAssign for EvalStats {
     }
 }
 
-/// Why a search stopped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum StopReason {
-    /// The search ran to its natural end (converged, grid done, feasible sample found).
-    Finished,
-    /// Differential evolution hit its generation cap.
-    MaxGenerations,
-    /// The request's evaluation budget ran out.
-    Budget,
-    /// The request's deadline passed; the answer is the best found so far.
-    Deadline,
-    /// Whoever asked no longer wants the answer (the daemon saw the client go away),
-    /// so the search gave up; the daemon sends no reply for it.
-    Abandoned,
+codes! {
+    /// Why a search stopped; the code is the reply's `stop`.
+    pub enum StopReason("stop", serde) {
+        /// The search ran to its natural end (converged, grid done, feasible sample found).
+        Finished = 0, "finished";
+        /// Differential evolution hit its generation cap.
+        MaxGenerations = 1, "max_generations";
+        /// The request's evaluation budget ran out.
+        Budget = 2, "budget";
+        /// The request's deadline passed; the answer is the best found so far.
+        Deadline = 3, "deadline";
+        /// Whoever asked no longer wants the answer (the daemon saw the client go away),
+        /// so the search gave up; the daemon sends no reply for it.
+        Abandoned = 4, "abandoned";
+    }
 }
 
 /// The optimal sensor state found, with everything SPEC §8 says an answer carries.

@@ -21,6 +21,7 @@
 #![warn(missing_docs)]
 
 pub mod answer;
+pub mod codes;
 pub mod limits;
 pub mod map_json;
 pub mod math;

@@ -10,94 +10,166 @@
 //! assert_eq!(bad.validate().unwrap_err().to_string(), "rho_min = 7 must be < rho_max = 6");
 //! ```
 
+use crate::codes::codes;
 use crate::limits::{MAX_COORDINATE, MAX_PERIMETER_POINTS};
 use crate::math::Vector3;
 use std::f64::consts::{FRAC_PI_2, PI};
 
-/// Which SDSMM predicts the measurement noise (SPEC §6).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ModelKind {
-    /// The paper's isotropic linear model.
-    #[default]
-    Paper,
-    /// `paper`'s variance stretched along the line of sight.
-    Anisotropic,
-    /// A trained probabilistic neural network, loaded from a file.
-    Learned,
-}
-
-impl ModelKind {
-    /// The name used in scenario files.
-    pub fn name(self) -> &'static str {
-        match self {
-            ModelKind::Paper => "paper",
-            ModelKind::Anisotropic => "anisotropic",
-            ModelKind::Learned => "learned",
-        }
+codes! {
+    /// Which SDSMM predicts the measurement noise (SPEC §6); the name is the scenario
+    /// files' and the code the wire's `params.model`.
+    #[derive(Default)]
+    pub enum ModelKind("params.model", serde) {
+        /// The paper's isotropic linear model.
+        #[default]
+        Paper = 0, "paper";
+        /// `paper`'s variance stretched along the line of sight.
+        Anisotropic = 1, "anisotropic";
+        /// A trained probabilistic neural network, loaded from a file.
+        Learned = 2, "learned";
     }
 }
 
-/// Rover, viewer, camera and model parameters. [`Params::default`] is SPEC's table.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Params {
-    /// Rover footprint radius, m (SPEC §2).
-    pub rover_radius: f64,
-    /// Target points on the footprint circle besides the marker centre.
-    pub perimeter_points: u32,
-    /// Marker side, m.
-    pub marker_size: f64,
-    /// Marker height above ground, m.
-    pub marker_height: f64,
-    /// Viewer body radius, m (SPEC §3).
-    pub viewer_radius: f64,
-    /// Extra clearance for the collision rays, m (SPEC §5).
-    pub safety_margin: f64,
-    /// Lowest viewer altitude, m.
-    pub z_min: f64,
-    /// Highest viewer altitude, m.
-    pub z_max: f64,
-    /// Downward camera pitch, rad (positive looks down).
-    pub camera_pitch: f64,
-    /// Camera translation in the level viewer frame, m.
-    pub t_vs: Vector3<f64>,
-    /// Horizontal field of view, rad.
-    pub f_h: f64,
-    /// Vertical field of view, rad.
-    pub f_v: f64,
-    /// Shortest detection range, m.
-    pub rho_min: f64,
-    /// Longest detection range, m.
-    pub rho_max: f64,
-    /// Sun-glare lobe exponent κ.
-    pub kappa: f64,
-    /// Anisotropy λ of the `anisotropic` model.
-    pub lambda: f64,
-    /// The SDSMM to use.
-    pub model: ModelKind,
+/// Calls macro `$callback` with every parameter of SPEC §11, written once here:
+/// its documentation, its place in the wire struct (`#[wire(i)]`: the field's order
+/// in [`WireParams`](crate::wire::rendezvous::WireParams) and its bit in `set`), its
+/// name (the field, the key in files, the C field), its type and its SPEC default.
+/// The list is in the order of [`Params`] and of the files dyfos writes.
+///
+/// [`Params`] and its `Default`, the wire conversions and `WireParams::FIELDS`, the
+/// scenario files' `params` object both ways and the C binding's conversions are
+/// generated from it; the C and C++ headers, which must spell the fields out, are
+/// checked against it by the binding's tests.
+#[macro_export]
+macro_rules! spec_params {
+    ($callback:ident) => {
+        $callback! {
+            /// Rover footprint radius, m (SPEC §2).
+            #[wire(0)] rover_radius: f64 = 0.75,
+            /// Target points on the footprint circle besides the marker centre.
+            #[wire(15)] perimeter_points: u32 = 8,
+            /// Marker side, m.
+            #[wire(1)] marker_size: f64 = 0.2,
+            /// Marker height above ground, m.
+            #[wire(2)] marker_height: f64 = 0.2,
+            /// Viewer body radius, m (SPEC §3).
+            #[wire(3)] viewer_radius: f64 = 0.375,
+            /// Extra clearance for the collision rays, m (SPEC §5).
+            #[wire(4)] safety_margin: f64 = 0.25,
+            /// Lowest viewer altitude, m.
+            #[wire(5)] z_min: f64 = 0.5,
+            /// Highest viewer altitude, m.
+            #[wire(6)] z_max: f64 = 8.0,
+            /// Downward camera pitch, rad (positive looks down).
+            #[wire(7)] camera_pitch: f64 = 45f64.to_radians(),
+            /// Camera translation in the level viewer frame, m.
+            #[wire(8)] t_vs: $crate::math::Vector3<f64> = $crate::math::Vector3::new(0.1, 0.0, -0.05),
+            /// Horizontal field of view, rad.
+            #[wire(9)] f_h: f64 = 69.4f64.to_radians(),
+            /// Vertical field of view, rad.
+            #[wire(10)] f_v: f64 = 42.5f64.to_radians(),
+            /// Shortest detection range, m.
+            #[wire(11)] rho_min: f64 = 1.0,
+            /// Longest detection range, m.
+            #[wire(12)] rho_max: f64 = 6.0,
+            /// Sun-glare lobe exponent κ.
+            #[wire(13)] kappa: f64 = 1.0,
+            /// Anisotropy λ of the `anisotropic` model.
+            #[wire(14)] lambda: f64 = 3.0,
+            /// The SDSMM to use.
+            #[wire(16)] model: $crate::params::ModelKind = $crate::params::ModelKind::Paper,
+        }
+    };
 }
 
-impl Default for Params {
-    fn default() -> Self {
-        Params {
-            rover_radius: 0.75,
-            perimeter_points: 8,
-            marker_size: 0.2,
-            marker_height: 0.2,
-            viewer_radius: 0.375,
-            safety_margin: 0.25,
-            z_min: 0.5,
-            z_max: 8.0,
-            camera_pitch: 45f64.to_radians(),
-            t_vs: Vector3::new(0.1, 0.0, -0.05),
-            f_h: 69.4f64.to_radians(),
-            f_v: 42.5f64.to_radians(),
-            rho_min: 1.0,
-            rho_max: 6.0,
-            kappa: 1.0,
-            lambda: 3.0,
-            model: ModelKind::Paper,
+macro_rules! params_struct {
+    ($($(#[doc = $doc:literal])* #[wire($slot:literal)] $name:ident: $ty:ty = $default:expr,)*) => {
+        /// Rover, viewer, camera and model parameters. [`Params::default`] is SPEC's table.
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        pub struct Params {
+            $($(#[doc = $doc])* pub $name: $ty,)*
         }
+
+        impl Default for Params {
+            fn default() -> Self {
+                Params { $($name: $default,)* }
+            }
+        }
+    };
+}
+
+spec_params!(params_struct);
+
+/// How a parameter's type is carried on the wire and in files.
+pub trait ParamValue: Copy {
+    /// Its type in [`WireParams`](crate::wire::rendezvous::WireParams).
+    type Wire: Copy;
+    /// Its type in the files' `params` object.
+    type File;
+    /// The wire value.
+    fn to_wire(self) -> Self::Wire;
+    /// The value from the wire, or what is wrong with the code `field` carries.
+    fn from_wire(field: &str, wire: Self::Wire) -> Result<Self, String>;
+    /// The value in files.
+    fn to_file(self) -> Self::File;
+    /// The value from a file.
+    fn from_file(file: Self::File) -> Self;
+}
+
+macro_rules! plain_param_value {
+    ($($ty:ty),*) => {$(
+        impl ParamValue for $ty {
+            type Wire = $ty;
+            type File = $ty;
+            fn to_wire(self) -> $ty {
+                self
+            }
+            fn from_wire(_: &str, wire: $ty) -> Result<$ty, String> {
+                Ok(wire)
+            }
+            fn to_file(self) -> $ty {
+                self
+            }
+            fn from_file(file: $ty) -> $ty {
+                file
+            }
+        }
+    )*};
+}
+
+plain_param_value!(f64, u32);
+
+impl ParamValue for Vector3<f64> {
+    type Wire = [f64; 3];
+    type File = [f64; 3];
+    fn to_wire(self) -> [f64; 3] {
+        self.into()
+    }
+    fn from_wire(_: &str, wire: [f64; 3]) -> Result<Self, String> {
+        Ok(Vector3::from(wire))
+    }
+    fn to_file(self) -> [f64; 3] {
+        self.into()
+    }
+    fn from_file(file: [f64; 3]) -> Self {
+        Vector3::from(file)
+    }
+}
+
+impl ParamValue for ModelKind {
+    type Wire = u32;
+    type File = ModelKind;
+    fn to_wire(self) -> u32 {
+        self.code()
+    }
+    fn from_wire(field: &str, wire: u32) -> Result<Self, String> {
+        ModelKind::try_from(wire).map_err(|_| format!("{field} = {wire} is not a model ({})", ModelKind::listing()))
+    }
+    fn to_file(self) -> ModelKind {
+        self
+    }
+    fn from_file(file: ModelKind) -> Self {
+        file
     }
 }
 

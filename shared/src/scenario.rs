@@ -16,8 +16,8 @@
 //! ```
 
 use crate::map_json::{RawObstacle, RawSun, RawVoxels, world_of};
-use crate::math::{Point3, Vector3, rows3};
-use crate::params::{ModelKind, Params};
+use crate::math::{Point3, rows3};
+use crate::params::{ParamValue, Params};
 use crate::posterior::Belief;
 use crate::world::{VoxelGrid, World};
 use serde::{Deserialize, Deserializer, Serialize};
@@ -148,71 +148,38 @@ struct RawRover {
 }
 
 macro_rules! raw_params {
-    ($($field:ident: $ty:ty),* $(,)?) => {
+    ($($(#[doc = $doc:literal])* #[wire($slot:literal)] $name:ident: $ty:ty = $default:expr,)*) => {
+        /// A `params` object: every field optional.
         #[derive(Debug, Default, Serialize, Deserialize)]
         #[serde(deny_unknown_fields)]
         struct RawParams {
             $(
                 #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
-                $field: Option<$ty>,
+                $name: Option<<$ty as ParamValue>::File>,
             )*
+        }
+
+        impl RawParams {
+            /// The parameters given, SPEC defaults for the others.
+            fn resolve(&self) -> Params {
+                let d = Params::default();
+                Params { $($name: self.$name.map_or(d.$name, ParamValue::from_file),)* }
+            }
+
+            /// Every parameter written out (files written by us are explicit).
+            fn explicit(p: &Params) -> Self {
+                RawParams { $($name: Some(p.$name.to_file()),)* }
+            }
         }
     };
 }
 
-raw_params!(
-    rover_radius: f64, perimeter_points: u32, marker_size: f64, marker_height: f64,
-    viewer_radius: f64, safety_margin: f64, z_min: f64, z_max: f64, camera_pitch: f64,
-    t_vs: [f64; 3], f_h: f64, f_v: f64, rho_min: f64, rho_max: f64, kappa: f64,
-    lambda: f64, model: ModelKind,
-);
+crate::spec_params!(raw_params);
 
-impl RawParams {
-    fn resolve(&self) -> Params {
-        let d = Params::default();
-        Params {
-            rover_radius: self.rover_radius.unwrap_or(d.rover_radius),
-            perimeter_points: self.perimeter_points.unwrap_or(d.perimeter_points),
-            marker_size: self.marker_size.unwrap_or(d.marker_size),
-            marker_height: self.marker_height.unwrap_or(d.marker_height),
-            viewer_radius: self.viewer_radius.unwrap_or(d.viewer_radius),
-            safety_margin: self.safety_margin.unwrap_or(d.safety_margin),
-            z_min: self.z_min.unwrap_or(d.z_min),
-            z_max: self.z_max.unwrap_or(d.z_max),
-            camera_pitch: self.camera_pitch.unwrap_or(d.camera_pitch),
-            t_vs: self.t_vs.map(Vector3::from).unwrap_or(d.t_vs),
-            f_h: self.f_h.unwrap_or(d.f_h),
-            f_v: self.f_v.unwrap_or(d.f_v),
-            rho_min: self.rho_min.unwrap_or(d.rho_min),
-            rho_max: self.rho_max.unwrap_or(d.rho_max),
-            kappa: self.kappa.unwrap_or(d.kappa),
-            lambda: self.lambda.unwrap_or(d.lambda),
-            model: self.model.unwrap_or(d.model),
-        }
-    }
-
-    /// Every parameter written out (files written by us are explicit).
-    fn explicit(p: &Params) -> Self {
-        RawParams {
-            rover_radius: Some(p.rover_radius),
-            perimeter_points: Some(p.perimeter_points),
-            marker_size: Some(p.marker_size),
-            marker_height: Some(p.marker_height),
-            viewer_radius: Some(p.viewer_radius),
-            safety_margin: Some(p.safety_margin),
-            z_min: Some(p.z_min),
-            z_max: Some(p.z_max),
-            camera_pitch: Some(p.camera_pitch),
-            t_vs: Some(p.t_vs.into()),
-            f_h: Some(p.f_h),
-            f_v: Some(p.f_v),
-            rho_min: Some(p.rho_min),
-            rho_max: Some(p.rho_max),
-            kappa: Some(p.kappa),
-            lambda: Some(p.lambda),
-            model: Some(p.model),
-        }
-    }
+/// Every parameter as a `params` object, as scenario files and recordings spell it
+/// ([`params_from_json`] reads it back, bit for bit).
+pub fn params_to_json(p: &Params) -> serde_json::Value {
+    serde_json::to_value(RawParams::explicit(p)).expect("numbers and names always serialize")
 }
 
 /// Edit distance, for "did you mean" suggestions.
@@ -399,6 +366,7 @@ impl Scenario {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::params::ModelKind;
 
     const GOOD: &str = r#"{
       "bounds": [-10.0, -10.0, 10.0, 10.0],

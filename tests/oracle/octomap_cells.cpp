@@ -1,4 +1,4 @@
-// liboctomap as the oracle of tests/tests/octomap.rs: OctoMap's own reader and writer,
+// liboctomap as the oracle of tests/tests/it/octomap.rs: OctoMap's own reader and writer,
 // not ours.
 //
 //   octomap_cells FILE.bt

@@ -10,6 +10,7 @@
 //! Needs root (CI runs as root); [`Hosts::create`] returns `None` after printing a
 //! loud `SKIPPED` line otherwise.
 
+use dyfos_process::netns::{Netns, ip_path, join};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 
@@ -31,20 +32,7 @@ static NEXT: AtomicU32 = AtomicU32::new(0);
 /// Network namespaces standing for hosts.
 #[derive(Debug)]
 pub struct Hosts {
-    names: Vec<String>,
-}
-
-fn ip(args: &[&str]) -> Result<(), String> {
-    let out = Command::new(ip_path()).args(args).stdin(Stdio::null()).output().map_err(|e| format!("ip: {e}"))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!("ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).trim()))
-    }
-}
-
-fn ip_path() -> &'static str {
-    if std::path::Path::new("/usr/sbin/ip").exists() { "/usr/sbin/ip" } else { "ip" }
+    hosts: Vec<Netns>,
 }
 
 impl Hosts {
@@ -62,36 +50,20 @@ impl Hosts {
         }
         let n = NEXT.fetch_add(1, Ordering::Relaxed);
         let tag = format!("dyfos-{}-{n}", std::process::id());
-        let mut names = vec![format!("{tag}-rover"), format!("{tag}-viewer")];
+        let roles: &[&str] = if intruder { &["rover", "viewer", "intruder"] } else { &["rover", "viewer"] };
+        let hosts: Vec<Netns> =
+            roles.iter().map(|role| Netns::create(&format!("{tag}-{role}")).expect("a network namespace")).collect();
+        join((&hosts[ROVER], "dl0", ROVER_IP), (&hosts[VIEWER], "dl0", VIEWER_IP)).expect("the rover-viewer link");
         if intruder {
-            names.push(format!("{tag}-intruder"));
+            join((&hosts[ROVER], "dl1", ROVER_IP_2), (&hosts[INTRUDER], "dl0", INTRUDER_IP))
+                .expect("the intruder link");
         }
-        let mut hosts = Hosts { names: Vec::new() };
-        for name in &names {
-            ip(&["netns", "add", name]).expect("ip netns add");
-            hosts.names.push(name.clone());
-            ip(&["-n", name, "link", "set", "lo", "up"]).expect("lo up");
-        }
-        let join = |a: usize, b: usize, ifa: &str, ifb: &str, ipa: &str, ipb: &str| {
-            let (na, nb) = (&names[a], &names[b]);
-            ip(&["link", "add", ifa, "netns", na, "type", "veth", "peer", "name", ifb, "netns", nb]).expect("veth");
-            ip(&["-n", na, "addr", "add", &format!("{ipa}/24"), "dev", ifa]).expect("addr");
-            ip(&["-n", nb, "addr", "add", &format!("{ipb}/24"), "dev", ifb]).expect("addr");
-            ip(&["-n", na, "link", "set", ifa, "up"]).expect("up");
-            ip(&["-n", nb, "link", "set", ifb, "up"]).expect("up");
-        };
-        join(ROVER, VIEWER, "dl0", "dl0", ROVER_IP, VIEWER_IP);
-        if intruder {
-            join(ROVER, INTRUDER, "dl1", "dl0", ROVER_IP_2, INTRUDER_IP);
-        }
-        Some(hosts)
+        Some(Hosts { hosts })
     }
 
     /// `program` run inside host `host`'s network namespace.
     pub fn command(&self, host: usize, program: &std::path::Path) -> Command {
-        let mut cmd = Command::new(ip_path());
-        cmd.args(["netns", "exec", &self.names[host]]).arg(program);
-        cmd
+        self.hosts[host].command(program)
     }
 
     /// The rover host's Zenoh endpoint as seen from `host`.
@@ -102,18 +74,8 @@ impl Hosts {
 
     /// Cuts (`false`) or restores (`true`) the rover–viewer link, as a radio fade does.
     pub fn set_link(&self, up: bool) {
-        ip(&["-n", &self.names[ROVER], "link", "set", "dl0", if up { "up" } else { "down" }]).expect("ip link set");
-        ip(&["-n", &self.names[VIEWER], "link", "set", "dl0", if up { "up" } else { "down" }]).expect("ip link set");
-    }
-}
-
-impl Drop for Hosts {
-    fn drop(&mut self) {
-        for name in &self.names {
-            if let Err(e) = ip(&["netns", "del", name]) {
-                eprintln!("cannot remove network namespace {name}: {e}");
-            }
-        }
+        self.hosts[ROVER].set_link("dl0", up).expect("ip link set");
+        self.hosts[VIEWER].set_link("dl0", up).expect("ip link set");
     }
 }
 
@@ -122,7 +84,7 @@ impl Drop for Hosts {
 /// of random frames. Killed when dropped.
 #[derive(Debug)]
 pub struct Stranger {
-    child: std::process::Child,
+    _child: crate::KillOnDrop,
     stdout: std::io::BufReader<std::process::ChildStdout>,
 }
 
@@ -139,7 +101,7 @@ impl Stranger {
             .spawn()
             .expect("start stranger");
         let stdout = std::io::BufReader::new(child.stdout.take().expect("stdout"));
-        Stranger { child, stdout }
+        Stranger { _child: crate::KillOnDrop::new(child), stdout }
     }
 
     /// The next line it prints (`holding N`, `sent …`); empty once it has exited.
@@ -147,12 +109,5 @@ impl Stranger {
         let mut line = String::new();
         let _ = std::io::BufRead::read_line(&mut self.stdout, &mut line);
         line.trim().to_string()
-    }
-}
-
-impl Drop for Stranger {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }

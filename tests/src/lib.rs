@@ -17,8 +17,10 @@ pub mod mission;
 pub mod soak;
 
 use dyfos_client::{Client, ClientConfig};
+use dyfos_service::launch::DyfosdCommand;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Command, ExitStatus};
+use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
@@ -33,15 +35,49 @@ pub fn bin_dir() -> PathBuf {
     deps.parent().expect("target profile dir").to_path_buf()
 }
 
-/// A workspace binary (`dyfosd`, `dyfos`) or, with `examples/` in front, an example.
+/// A workspace binary (`dyfosd`, `dyfos`, `dyfos-rover`, …) or, with `examples/` in
+/// front, an example. The first call in a test process builds the workspace's
+/// targets if they are missing (see [`build_binaries`]), so `cargo test` needs no
+/// build before it.
 pub fn bin(name: &str) -> PathBuf {
+    static BUILT: OnceLock<Result<(), String>> = OnceLock::new();
+    if let Err(e) = BUILT.get_or_init(build_binaries) {
+        panic!("{e}");
+    }
     let path = bin_dir().join(name);
-    assert!(
-        path.exists(),
-        "{} is missing: run `cargo build --workspace --all-targets` before `cargo test`",
-        path.display()
-    );
+    assert!(path.exists(), "{} is missing after building the workspace", path.display());
     path
+}
+
+/// Builds the workspace's targets with the cargo running the tests (`CARGO`), into
+/// the target directory and profile of the running test executable: tests need
+/// other packages' binaries, which cargo builds for a test only in its own package
+/// (`CARGO_BIN_EXE_*`; depending on another package's binary is unstable). One
+/// `--workspace --all-targets` build rather than one per binary (as escargot does):
+/// it resolves features as `cargo test --workspace` does (`--bins` alone resolves
+/// others and compiles the tree again), so after that or after
+/// `cargo build --workspace --all-targets` it only checks that all is fresh.
+fn build_binaries() -> Result<(), String> {
+    let profile_dir = bin_dir();
+    let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
+        Some("debug") => "dev".to_string(),
+        Some(name) => name.to_string(),
+        None => return Err(format!("{} is not a cargo profile directory", profile_dir.display())),
+    };
+    let parent = profile_dir.parent().ok_or("the target directory")?;
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let mut cmd = Command::new(cargo);
+    cmd.args(["build", "--quiet", "--workspace", "--all-targets", "--profile", &profile]);
+    // `target/<triple>/<profile>` when the tests were built with `--target`.
+    if parent.join("CACHEDIR.TAG").exists() {
+        cmd.arg("--target-dir").arg(parent);
+    } else {
+        let triple = parent.file_name().and_then(|n| n.to_str()).ok_or("the target triple")?;
+        cmd.args(["--target", triple]).arg("--target-dir").arg(parent.parent().ok_or("the target directory")?);
+    }
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).parent().ok_or("the workspace directory")?;
+    let status = cmd.current_dir(workspace).status().map_err(|e| format!("cannot run {cmd:?}: {e}"))?;
+    if status.success() { Ok(()) } else { Err(format!("{cmd:?} failed ({status}); its errors are above")) }
 }
 
 /// Polls `done` until it returns `Some`, panicking with `what` after [`PATIENCE`].
@@ -117,18 +153,15 @@ impl Sandbox {
     pub fn start_daemon_logging(&self, level: &str, extra: &[&str]) -> DaemonProcess {
         let log = self.state_dir.with_extension(format!("log-{}", NEXT.fetch_add(1, Ordering::Relaxed)));
         let log_file = std::fs::File::create(&log).expect("daemon log file");
-        let child = Command::new(bin("dyfosd"))
-            .args(["--prefix", &self.prefix, "--domain", &self.domain, "--state-dir"])
-            .arg(&self.state_dir)
+        let child = DyfosdCommand::new(&bin("dyfosd"), &self.prefix, &self.state_dir)
+            .domain(&self.domain)
+            .log(level, log_file)
             .args(extra)
-            .env("RUST_LOG", level)
-            .stdout(Stdio::null())
-            .stderr(log_file)
             .spawn()
             .expect("start dyfosd");
-        let mut daemon = DaemonProcess { child: Some(child), log };
+        let mut daemon = DaemonProcess { child, log };
         let mut client = wait_for("dyfosd to serve", || {
-            if let Some(status) = daemon.try_status() {
+            if let Some(status) = daemon.child.try_wait() {
                 panic!("dyfosd exited at start ({status}):\n{}", daemon.log());
             }
             Client::connect(&ClientConfig { connect_timeout: Duration::from_millis(50), ..self.client_config() }).ok()
@@ -214,14 +247,14 @@ impl Drop for Sandbox {
 /// A running `dyfosd`, killed (SIGKILL) when dropped.
 #[derive(Debug)]
 pub struct DaemonProcess {
-    child: Option<Child>,
+    child: KillOnDrop,
     log: PathBuf,
 }
 
 impl DaemonProcess {
     /// The process id.
     pub fn pid(&self) -> u32 {
-        self.child.as_ref().map_or(0, Child::id)
+        self.child.id()
     }
 
     /// Its log so far.
@@ -229,16 +262,9 @@ impl DaemonProcess {
         std::fs::read_to_string(&self.log).unwrap_or_default()
     }
 
-    fn try_status(&mut self) -> Option<ExitStatus> {
-        self.child.as_mut().and_then(|c| c.try_wait().ok().flatten())
-    }
-
     /// SIGKILL, and reap.
     pub fn kill9(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
+        self.child.kill();
     }
 
     /// SIGTERM, then waits for the exit.
@@ -249,14 +275,12 @@ impl DaemonProcess {
     /// Sends `signal_name` (`TERM`, `INT`), then waits for the exit.
     pub fn stop_with(&mut self, signal_name: &str) -> ExitStatus {
         signal(self.pid(), signal_name);
-        let status = wait_for(&format!("dyfosd to exit after SIG{signal_name}"), || self.try_status());
-        self.child = None;
-        status
+        wait_for(&format!("dyfosd to exit after SIG{signal_name}"), || self.child.try_wait())
     }
 
     /// Whether the process has not exited.
     pub fn is_running(&mut self) -> bool {
-        self.child.is_some() && self.try_status().is_none()
+        self.child.is_running()
     }
 }
 
@@ -279,16 +303,7 @@ pub fn signal(pid: u32, name: &str) {
     assert!(ok, "kill -{name} {pid} failed");
 }
 
-/// A child process killed when dropped.
-#[derive(Debug)]
-pub struct ChildGuard(pub Child);
-
-impl Drop for ChildGuard {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
+pub use dyfos_process::child::KillOnDrop;
 
 /// The workspace's test data directory.
 pub fn data(path: &str) -> PathBuf {

@@ -15,7 +15,7 @@
 //! ```
 
 use crate::hosts::{Hosts, ROVER, VIEWER};
-use crate::{Sandbox, bin, wait_for};
+use crate::{KillOnDrop, Sandbox, bin, wait_for};
 use dyfos_mission::eval::{MissionTrace, Recorder};
 use dyfos_mission::mission::Mission;
 use dyfos_mission::mission::log::read_events;
@@ -26,7 +26,7 @@ use dyfos_shared::params::Params;
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::world::{Bounds, Obstacle, Sun, VerticalCylinder, World};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 /// A 16 m × 16 m world with 6 trees and 4 waypoints over 10 m. The odometry is
@@ -103,7 +103,7 @@ impl<'a> MissionFiles<'a> {
         cmd.arg("--events").arg(&events);
         cmd.stderr(std::fs::File::create(&log).expect("log file"));
         let child = cmd.spawn().unwrap_or_else(|e| panic!("start {what}: {e}"));
-        Robot { child: Some(child), log, events }
+        Robot { child: KillOnDrop::new(child), log, events }
     }
 
     /// Starts `dyfos-viewer` for mission `name` with `algo`, unpaced, map id 1.
@@ -169,7 +169,7 @@ impl<'a> MissionFiles<'a> {
         let log = self.dir.join(format!("{name}-link-{side}-{}.log", self.next_log()));
         cmd.stderr(std::fs::File::create(&log).expect("log file"));
         let child = cmd.spawn().unwrap_or_else(|e| panic!("start dyfos-link: {e}"));
-        Robot { child: Some(child), log, events: self.dir.join("none.jsonl") }
+        Robot { child: KillOnDrop::new(child), log, events: self.dir.join("none.jsonl") }
     }
 
     fn next_log(&self) -> u32 {
@@ -196,7 +196,7 @@ impl Drop for MissionFiles<'_> {
 /// A rover or viewer process, killed when dropped.
 #[derive(Debug)]
 pub struct Robot {
-    child: Option<Child>,
+    child: KillOnDrop,
     log: PathBuf,
     events: PathBuf,
 }
@@ -204,38 +204,31 @@ pub struct Robot {
 impl Robot {
     /// The process id.
     pub fn pid(&self) -> u32 {
-        self.child.as_ref().map_or(0, Child::id)
+        self.child.id()
     }
 
     /// Waits (at most [`crate::PATIENCE`]) for the exit.
     pub fn wait_exit(&mut self) -> ExitStatus {
-        let child = self.child.as_mut().expect("still running");
-        let status = wait_for("a mission process to exit", || child.try_wait().expect("try_wait"));
-        self.child = None;
-        status
+        assert!(self.child.child_mut().is_some(), "still running");
+        wait_for("a mission process to exit", || self.child.try_wait())
     }
 
     /// `Some(status)` if it has exited.
     pub fn try_exit(&mut self) -> Option<ExitStatus> {
-        let status = self.child.as_mut()?.try_wait().expect("try_wait")?;
-        self.child = None;
-        Some(status)
+        self.child.try_wait()
     }
 
     /// SIGTERM, and wait (at most [`crate::PATIENCE`]) for the exit.
     pub fn terminate(&mut self) -> ExitStatus {
-        if let Some(c) = &self.child {
-            dyfos_process::shutdown::terminate(c.id());
+        if self.child.child_mut().is_some() {
+            dyfos_process::shutdown::terminate(self.child.id());
         }
         self.wait_exit()
     }
 
     /// SIGKILL, and reap.
     pub fn kill9(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
+        self.child.kill();
     }
 
     /// Its log (stderr) so far.
@@ -251,12 +244,6 @@ impl Robot {
     /// The event log's path.
     pub fn events_path(&self) -> &Path {
         &self.events
-    }
-}
-
-impl Drop for Robot {
-    fn drop(&mut self) {
-        self.kill9();
     }
 }
 

@@ -148,58 +148,27 @@ pub struct dyfos_params {
     pub set: u32,
 }
 
-impl From<&dyfos_params> for WireParams {
-    fn from(p: &dyfos_params) -> Self {
-        WireParams {
-            rover_radius: p.rover_radius,
-            marker_size: p.marker_size,
-            marker_height: p.marker_height,
-            viewer_radius: p.viewer_radius,
-            safety_margin: p.safety_margin,
-            z_min: p.z_min,
-            z_max: p.z_max,
-            camera_pitch: p.camera_pitch,
-            t_vs: p.t_vs,
-            f_h: p.f_h,
-            f_v: p.f_v,
-            rho_min: p.rho_min,
-            rho_max: p.rho_max,
-            kappa: p.kappa,
-            lambda: p.lambda,
-            perimeter_points: p.perimeter_points,
-            model: p.model,
-            set: p.set,
-            reserved: 0,
+macro_rules! c_params {
+    ($($(#[doc = $doc:literal])* #[wire($slot:literal)] $name:ident: $ty:ty = $default:expr,)*) => {
+        impl From<&dyfos_params> for WireParams {
+            fn from(p: &dyfos_params) -> Self {
+                WireParams { $($name: p.$name,)* set: p.set, reserved: 0 }
+            }
         }
-    }
+
+        impl dyfos_params {
+            /// `params`' values with the given `set` bits.
+            pub(crate) fn from_params(params: &Params, set: u32) -> Self {
+                let w = WireParams::from(params);
+                dyfos_params { $($name: w.$name,)* set }
+            }
+        }
+    };
 }
 
-impl dyfos_params {
-    /// `params`' values with the given `set` bits.
-    pub(crate) fn from_params(params: &Params, set: u32) -> Self {
-        let w = WireParams::from(params);
-        dyfos_params {
-            rover_radius: w.rover_radius,
-            marker_size: w.marker_size,
-            marker_height: w.marker_height,
-            viewer_radius: w.viewer_radius,
-            safety_margin: w.safety_margin,
-            z_min: w.z_min,
-            z_max: w.z_max,
-            camera_pitch: w.camera_pitch,
-            t_vs: w.t_vs,
-            f_h: w.f_h,
-            f_v: w.f_v,
-            rho_min: w.rho_min,
-            rho_max: w.rho_max,
-            kappa: w.kappa,
-            lambda: w.lambda,
-            perimeter_points: w.perimeter_points,
-            model: w.model,
-            set,
-        }
-    }
+dyfos_shared::spec_params!(c_params);
 
+impl dyfos_params {
     /// Decodes and validates (SPEC §11 ranges); unset fields take the default.
     pub(crate) fn to_params(self) -> Result<Params, Failure> {
         if self.set == 0 {
@@ -285,13 +254,10 @@ impl dyfos_rendezvous_request {
     pub(crate) unsafe fn decode(&self) -> Result<RendezvousRequest, Failure> {
         let belief = Belief::new(self.mean, self.cov)
             .map_err(|e| Failure::new(DYFOS_STATUS_INVALID_BELIEF, format!("belief: {e}")))?;
-        let algorithm = *Algorithm::ALL.get(self.algorithm as usize).ok_or_else(|| {
+        let algorithm = Algorithm::try_from(self.algorithm).map_err(|e| {
             Failure::new(
                 DYFOS_STATUS_INVALID_ALGORITHM,
-                format!(
-                    "algorithm = {} is not an algorithm (0 dyfos, 1 dyfos-scipy, 2 brute, 3 random, 4 center)",
-                    self.algorithm
-                ),
+                format!("algorithm = {} is not an algorithm ({})", e.value, Algorithm::listing()),
             )
         })?;
         let params = self.params.to_params()?;
@@ -414,22 +380,12 @@ impl From<&MapInfo> for dyfos_map_info {
     }
 }
 
-fn stop_code(s: StopReason) -> u32 {
-    match s {
-        StopReason::Finished => DYFOS_STOP_FINISHED,
-        StopReason::MaxGenerations => DYFOS_STOP_MAX_GENERATIONS,
-        StopReason::Budget => DYFOS_STOP_BUDGET,
-        StopReason::Deadline => DYFOS_STOP_DEADLINE,
-        StopReason::Abandoned => DYFOS_STOP_ABANDONED,
-    }
-}
-
 impl From<&Answer> for dyfos_answer {
     fn from(a: &Answer) -> Self {
         let e = a.evaluations;
         dyfos_answer {
-            algorithm: Algorithm::ALL.iter().position(|x| *x == a.algorithm).unwrap_or(0) as u32,
-            stop: stop_code(a.stop),
+            algorithm: a.algorithm.code(),
+            stop: a.stop.code(),
             map_version: a.map_version,
             x: a.x.to_array(),
             cost: a.cost,
@@ -454,17 +410,10 @@ impl dyfos_answer {
     /// Rebuilds the answer (for its JSON); codes written by the caller are checked.
     pub(crate) fn decode(&self) -> Result<Answer, Failure> {
         let a = self;
-        let algorithm = *Algorithm::ALL
-            .get(a.algorithm as usize)
-            .ok_or_else(|| Failure::invalid(format!("answer.algorithm = {} is not an algorithm", a.algorithm)))?;
-        let stop = match a.stop {
-            DYFOS_STOP_FINISHED => StopReason::Finished,
-            DYFOS_STOP_MAX_GENERATIONS => StopReason::MaxGenerations,
-            DYFOS_STOP_BUDGET => StopReason::Budget,
-            DYFOS_STOP_DEADLINE => StopReason::Deadline,
-            DYFOS_STOP_ABANDONED => StopReason::Abandoned,
-            s => return Err(Failure::invalid(format!("answer.stop = {s} is not a stop reason"))),
-        };
+        let algorithm = Algorithm::try_from(a.algorithm)
+            .map_err(|e| Failure::invalid(format!("answer.algorithm = {} is not an algorithm", e.value)))?;
+        let stop = StopReason::try_from(a.stop)
+            .map_err(|e| Failure::invalid(format!("answer.stop = {} is not a stop reason", e.value)))?;
         let [i, j, k, w] = a.sensor_quaternion;
         let e = a.evaluations;
         Ok(Answer {
@@ -550,33 +499,79 @@ pub(crate) unsafe fn c_str<'a>(ptr: *const c_char) -> Option<&'a CStr> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dyfos_shared::params::ModelKind;
 
+    /// The `#define PREFIX<NAME> <code>u` lines of the header (which the header test
+    /// keeps equal to cbindgen's output of this file's constants).
+    fn header_codes(prefix: &str) -> Vec<(String, u32)> {
+        let header = include_str!("../include/dyfos.h");
+        let mut out: Vec<(String, u32)> = header
+            .lines()
+            .filter_map(|l| l.strip_prefix("#define ")?.strip_prefix(prefix))
+            .filter_map(|rest| {
+                let (name, code) = rest.split_once(' ')?;
+                Some((name.to_string(), code.trim_end_matches('u').parse().ok()?))
+            })
+            .collect();
+        out.sort_by_key(|(_, code)| *code);
+        out
+    }
+
+    /// Each C constant is its set's wire code, named after it; none is missing or extra.
     #[test]
-    fn param_bits_follow_wire_params_fields() {
-        let ours = [
-            DYFOS_PARAM_ROVER_RADIUS,
-            DYFOS_PARAM_MARKER_SIZE,
-            DYFOS_PARAM_MARKER_HEIGHT,
-            DYFOS_PARAM_VIEWER_RADIUS,
-            DYFOS_PARAM_SAFETY_MARGIN,
-            DYFOS_PARAM_Z_MIN,
-            DYFOS_PARAM_Z_MAX,
-            DYFOS_PARAM_CAMERA_PITCH,
-            DYFOS_PARAM_T_VS,
-            DYFOS_PARAM_F_H,
-            DYFOS_PARAM_F_V,
-            DYFOS_PARAM_RHO_MIN,
-            DYFOS_PARAM_RHO_MAX,
-            DYFOS_PARAM_KAPPA,
-            DYFOS_PARAM_LAMBDA,
-            DYFOS_PARAM_PERIMETER_POINTS,
-            DYFOS_PARAM_MODEL,
-        ];
-        assert_eq!(ours.len(), WireParams::FIELDS.len());
-        for (bit, name) in ours.iter().zip(WireParams::FIELDS) {
-            assert_eq!(Some(*bit), WireParams::bit(name), "{name}");
+    fn c_codes_are_the_wire_codes() {
+        fn c_names(names: &[&str]) -> Vec<String> {
+            names.iter().map(|n| n.to_uppercase().replace('-', "_")).collect()
         }
+        let sets: [(&str, Vec<String>, Vec<u32>); 3] = [
+            ("DYFOS_ALGORITHM_", c_names(Algorithm::NAMES), Algorithm::ALL.map(Algorithm::code).to_vec()),
+            ("DYFOS_MODEL_", c_names(ModelKind::NAMES), ModelKind::ALL.map(ModelKind::code).to_vec()),
+            ("DYFOS_STOP_", c_names(StopReason::NAMES), StopReason::ALL.map(StopReason::code).to_vec()),
+        ];
+        for (prefix, names, codes) in sets {
+            let expected: Vec<(String, u32)> = names.into_iter().zip(codes).collect();
+            assert_eq!(header_codes(prefix), expected, "{prefix}*");
+        }
+    }
+
+    /// The C header spells the parameters out (cbindgen cannot see through the
+    /// list's macro): `dyfos_params`' fields, the `DYFOS_PARAM_*` bits and the C++
+    /// accessors are each the list's, in its wire order.
+    #[test]
+    fn c_and_cpp_params_follow_wire_params_fields() {
+        let header = include_str!("../include/dyfos.h");
+        let bits: Vec<String> = header
+            .lines()
+            .filter_map(|l| l.strip_prefix("#define DYFOS_PARAM_"))
+            .map(|l| l.split_whitespace().collect::<Vec<_>>().join(" "))
+            .collect();
+        let expected: Vec<String> =
+            WireParams::FIELDS.iter().enumerate().map(|(i, f)| format!("{} (1u << {i})", f.to_uppercase())).collect();
+        assert_eq!(bits, expected);
         assert_eq!(DYFOS_PARAMS_ALL_SET, WireParams::ALL_SET);
+
+        let body = header.split("typedef struct dyfos_params {").nth(1).and_then(|b| b.split("} dyfos_params;").next());
+        let fields: Vec<&str> = body
+            .expect("dyfos_params in dyfos.h")
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty() && !l.starts_with('/') && !l.starts_with('*'))
+            .filter_map(|l| l.trim_end_matches(';').split_whitespace().last())
+            .map(|f| f.split('[').next().unwrap_or(f))
+            .collect();
+        let mut expected: Vec<&str> = WireParams::FIELDS.to_vec();
+        expected.push("set");
+        assert_eq!(fields, expected, "dyfos_params' fields in dyfos.h");
+
+        let cpp = include_str!("../include/dyfos.hpp");
+        for field in WireParams::FIELDS {
+            let bit = format!("DYFOS_PARAM_{}", field.to_uppercase());
+            assert!(
+                cpp.contains(&format!("DYFOS_HPP_FIELD({field}, ")) || cpp.contains(&format!("Params& {field}(")),
+                "dyfos.hpp has no setter for {field}"
+            );
+            assert!(cpp.contains(&bit), "dyfos.hpp does not use {bit}");
+        }
     }
 
     #[test]

@@ -5,8 +5,8 @@
 //!
 //! `cargo test` builds this crate's cdylib and staticlib before its tests (the lib
 //! target is built with all its crate types), next to the test executable in
-//! `target/<profile>/deps/`; `dyfosd` and `dyfos` come from
-//! `cargo build --workspace --bins`.
+//! `target/<profile>/deps/`; `dyfosd` and `dyfos` from `dyfos_tests::bin`, which
+//! builds them if they are missing.
 
 use dyfos_tests::{Sandbox, bin, data};
 use std::io::{BufRead, BufReader, Write};

@@ -19,7 +19,7 @@
 //!
 //! For clients in other languages, `docs/wire.md` in the repository documents every
 //! type's name, size and field offsets, every code and default, and the protocol
-//! rules; `tests/tests/wire_doc.rs` checks it against these definitions.
+//! rules; `tests/tests/it/wire_doc.rs` checks it against these definitions.
 //!
 //! ```
 //! use dyfos_shared::wire::{ServiceNames, Status};
@@ -38,6 +38,7 @@ pub mod rendezvous;
 pub mod services;
 pub mod stats;
 
+use crate::codes::codes;
 use crate::limits::{DETAIL_LEN, MAX_PREFIX_LEN};
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -101,92 +102,59 @@ impl ServiceNames {
     }
 }
 
-macro_rules! statuses {
-    ($($(#[$doc:meta])* $name:ident = $value:literal, $text:literal;)*) => {
-        /// The outcome code of every reply. `Ok` is 0; every error has its own code,
-        /// stable on the wire. The reply's detail text says what to change.
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-        #[repr(u32)]
-        pub enum Status {
-            $($(#[$doc])* $name = $value,)*
-        }
-
-        impl Status {
-            /// Every status, in code order.
-            pub const ALL: &[Status] = &[$(Status::$name,)*];
-
-            /// The snake_case name, as printed by `dyfos` and in logs.
-            pub fn name(self) -> &'static str {
-                match self { $(Status::$name => $text,)* }
-            }
-        }
-
-        impl TryFrom<u32> for Status {
-            type Error = UnknownCode;
-            fn try_from(value: u32) -> Result<Self, UnknownCode> {
-                match value {
-                    $($value => Ok(Status::$name),)*
-                    _ => Err(UnknownCode { field: "status", value }),
-                }
-            }
-        }
-    };
-}
-
-statuses! {
-    /// Success.
-    Ok = 0, "ok";
-    /// A header field is not one of its allowed codes (operation, mode, flags), or a
-    /// reserved field is not zero.
-    MalformedRequest = 1, "malformed_request";
-    /// The algorithm tag is unknown.
-    InvalidAlgorithm = 2, "invalid_algorithm";
-    /// The rendezvous belief is not finite or its covariance is not SPD.
-    InvalidBelief = 3, "invalid_belief";
-    /// A parameter override is out of its range (SPEC §11).
-    InvalidParams = 4, "invalid_params";
-    /// The requested SDSMM model cannot run in the daemon (`learned` without weights).
-    UnsupportedModel = 5, "unsupported_model";
-    /// The deadline is longer than the daemon accepts (one hour).
-    InvalidDeadline = 6, "invalid_deadline";
-    /// A delta record has an unknown tag, a bad flag or a truncated voxel run.
-    MalformedDelta = 7, "malformed_delta";
-    /// A delta was rejected by the map (SPEC §1: unknown id to remove, invalid
-    /// geometry, ...); the batch is rejected whole and the map is unchanged.
-    InvalidDelta = 8, "invalid_delta";
-    /// No map has this id.
-    UnknownMap = 9, "unknown_map";
-    /// The map's version is not the one the request expected.
-    MapVersionMismatch = 10, "map_version_mismatch";
-    /// Creating a map whose id is taken (or uploading without the replace flag).
-    MapExists = 11, "map_exists";
-    /// Too many records, chunks, maps or uploads for the daemon's limits.
-    OverCapacity = 12, "over_capacity";
-    /// An upload chunk arrived before the chunks that precede it.
-    ChunkOutOfOrder = 13, "chunk_out_of_order";
-    /// An upload chunk arrived twice.
-    ChunkDuplicate = 14, "chunk_duplicate";
-    /// The upload this chunk belongs to was abandoned (superseded by a new upload
-    /// of the same map, or idle too long) and will never complete.
-    ChunkIncomplete = 15, "chunk_incomplete";
-    /// No candidate pose passed the constraints (SPEC §8 `no_feasible_pose`).
-    NoFeasiblePose = 16, "no_feasible_pose";
-    /// The deadline passed before any feasible pose was found.
-    DeadlineExceeded = 17, "deadline_exceeded";
-    /// The daemon's queue is full; retry shortly.
-    Busy = 18, "busy";
-    /// The map change could not be written to the state directory; the map is unchanged.
-    StorageFailed = 19, "storage_failed";
-    /// The daemon is shutting down and takes no new work.
-    ShuttingDown = 20, "shutting_down";
-    /// The daemon hit a bug while handling the request (its log says where); the
-    /// request changed nothing and other requests are still served. Please report it.
-    Internal = 21, "internal_error";
-}
-
-impl std::fmt::Display for Status {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
+codes! {
+    /// The outcome code of every reply. `Ok` is 0; every error has its own code,
+    /// stable on the wire. The reply's detail text says what to change.
+    #[derive(PartialOrd, Ord)]
+    pub enum Status("status") {
+        /// Success.
+        Ok = 0, "ok";
+        /// A header field is not one of its allowed codes (operation, mode, flags), or a
+        /// reserved field is not zero.
+        MalformedRequest = 1, "malformed_request";
+        /// The algorithm tag is unknown.
+        InvalidAlgorithm = 2, "invalid_algorithm";
+        /// The rendezvous belief is not finite or its covariance is not SPD.
+        InvalidBelief = 3, "invalid_belief";
+        /// A parameter override is out of its range (SPEC §11).
+        InvalidParams = 4, "invalid_params";
+        /// The requested SDSMM model cannot run in the daemon (`learned` without weights).
+        UnsupportedModel = 5, "unsupported_model";
+        /// The deadline is longer than the daemon accepts (one hour).
+        InvalidDeadline = 6, "invalid_deadline";
+        /// A delta record has an unknown tag, a bad flag or a truncated voxel run.
+        MalformedDelta = 7, "malformed_delta";
+        /// A delta was rejected by the map (SPEC §1: unknown id to remove, invalid
+        /// geometry, ...); the batch is rejected whole and the map is unchanged.
+        InvalidDelta = 8, "invalid_delta";
+        /// No map has this id.
+        UnknownMap = 9, "unknown_map";
+        /// The map's version is not the one the request expected.
+        MapVersionMismatch = 10, "map_version_mismatch";
+        /// Creating a map whose id is taken (or uploading without the replace flag).
+        MapExists = 11, "map_exists";
+        /// Too many records, chunks, maps or uploads for the daemon's limits.
+        OverCapacity = 12, "over_capacity";
+        /// An upload chunk arrived before the chunks that precede it.
+        ChunkOutOfOrder = 13, "chunk_out_of_order";
+        /// An upload chunk arrived twice.
+        ChunkDuplicate = 14, "chunk_duplicate";
+        /// The upload this chunk belongs to was abandoned (superseded by a new upload
+        /// of the same map, or idle too long) and will never complete.
+        ChunkIncomplete = 15, "chunk_incomplete";
+        /// No candidate pose passed the constraints (SPEC §8 `no_feasible_pose`).
+        NoFeasiblePose = 16, "no_feasible_pose";
+        /// The deadline passed before any feasible pose was found.
+        DeadlineExceeded = 17, "deadline_exceeded";
+        /// The daemon's queue is full; retry shortly.
+        Busy = 18, "busy";
+        /// The map change could not be written to the state directory; the map is unchanged.
+        StorageFailed = 19, "storage_failed";
+        /// The daemon is shutting down and takes no new work.
+        ShuttingDown = 20, "shutting_down";
+        /// The daemon hit a bug while handling the request (its log says where); the
+        /// request changed nothing and other requests are still served. Please report it.
+        Internal = 21, "internal_error";
     }
 }
 
@@ -197,15 +165,7 @@ impl Status {
     }
 }
 
-/// An integer tag or code outside its set.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-#[error("{field} = {value} is not a known code")]
-pub struct UnknownCode {
-    /// The field.
-    pub field: &'static str,
-    /// The value found.
-    pub value: u32,
-}
+pub use crate::codes::UnknownCode;
 
 /// A short UTF-8 text carried by a reply (the error's detail), truncated at a
 /// character boundary to fit.

@@ -34,23 +34,25 @@
 use super::map::{MapId, WireDelta, decode_batch, encode_deltas};
 use super::{ANY_VERSION, Detail, Rejection, Status};
 use crate::answer::{Algorithm, Answer, EvalStats, StopReason};
+use crate::codes::codes;
 use crate::limits::{MAX_DEADLINE_MICROS, MAX_INLINE_DELTAS};
-use crate::math::{Matrix3, Point3, UnitQuaternion, Vector3};
-use crate::params::{ModelKind, Params};
+use crate::math::{Matrix3, Point3, UnitQuaternion};
+use crate::params::{ParamValue, Params};
 use crate::posterior::Belief;
 use crate::world::MapDelta;
 use iceoryx2::prelude::ZeroCopySend;
 use std::time::Duration;
 
-/// What the daemon does with a valid request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Mode {
-    /// Search and answer.
-    Solve = 0,
-    /// Validate everything (map, version, belief, parameters, inline deltas on a
-    /// copy of the map) and answer at once without searching or changing the map:
-    /// the round-trip floor, for latency benchmarks and health checks.
-    Check = 1,
+codes! {
+    /// What the daemon does with a valid request; the code is the header's `mode`.
+    pub enum Mode("mode") {
+        /// Search and answer.
+        Solve = 0, "solve";
+        /// Validate everything (map, version, belief, parameters, inline deltas on a
+        /// copy of the map) and answer at once without searching or changing the map:
+        /// the round-trip floor, for latency benchmarks and health checks.
+        Check = 1, "check";
+    }
 }
 
 /// Every parameter of SPEC §11, as plain numbers. `model`: 0 paper, 1 anisotropic,
@@ -117,145 +119,81 @@ pub struct WireParams {
     pub reserved: u32,
 }
 
-impl WireParams {
-    /// The fields' SPEC §11 names, in field order: bit `i` of `set` is `FIELDS[i]`.
-    pub const FIELDS: [&'static str; 17] = [
-        "rover_radius",
-        "marker_size",
-        "marker_height",
-        "viewer_radius",
-        "safety_margin",
-        "z_min",
-        "z_max",
-        "camera_pitch",
-        "t_vs",
-        "f_h",
-        "f_v",
-        "rho_min",
-        "rho_max",
-        "kappa",
-        "lambda",
-        "perimeter_points",
-        "model",
-    ];
+macro_rules! wire_params {
+    ($($(#[doc = $doc:literal])* #[wire($slot:literal)] $name:ident: $ty:ty = $default:expr,)*) => {
+        impl WireParams {
+            /// The fields' SPEC §11 names, in field order: bit `i` of `set` is `FIELDS[i]`.
+            pub const FIELDS: [&'static str; [$(stringify!($name)),*].len()] = {
+                let mut fields = [""; [$(stringify!($name)),*].len()];
+                $(fields[$slot] = stringify!($name);)*
+                fields
+            };
+        }
 
+        // The struct above is the one place that restates the parameters (its
+        // layout is the ABI): its fields must be in `#[wire(i)]` order.
+        const _: () = {
+            let mut offsets = [0usize; WireParams::FIELDS.len()];
+            $(offsets[$slot] = std::mem::offset_of!(WireParams, $name);)*
+            let mut i = 1;
+            while i < offsets.len() {
+                assert!(offsets[i - 1] < offsets[i], "WireParams's fields are not in #[wire(i)] order");
+                i += 1;
+            }
+        };
+
+        impl From<&Params> for WireParams {
+            fn from(p: &Params) -> Self {
+                WireParams { $($name: ParamValue::to_wire(p.$name),)* set: WireParams::ALL_SET, reserved: 0 }
+            }
+        }
+
+        impl TryFrom<&WireParams> for Params {
+            type Error = Rejection;
+
+            /// Decodes and validates (SPEC §11 ranges): `invalid_params` names the field.
+            /// Fields whose `set` bit is clear take the SPEC default.
+            fn try_from(w: &WireParams) -> Result<Self, Rejection> {
+                if w.set & !WireParams::ALL_SET != 0 || w.reserved != 0 {
+                    return Err(Rejection::new(
+                        Status::InvalidParams,
+                        format!(
+                            "params.set = {:#x} has bits above {:#x}, or params.reserved = {} is not 0",
+                            w.set,
+                            WireParams::ALL_SET,
+                            w.reserved
+                        ),
+                    ));
+                }
+                // Unset fields take their default before anything is decoded, so their
+                // bits (whatever a peer left there) are never looked at.
+                let d = WireParams::from(&Params::default());
+                let given = |name: &str| w.set & WireParams::bit(name).unwrap_or(0) != 0;
+                let invalid = |message: String| Rejection::new(Status::InvalidParams, message);
+                let p = Params {
+                    $($name: ParamValue::from_wire(
+                        concat!("params.", stringify!($name)),
+                        if given(stringify!($name)) { w.$name } else { d.$name },
+                    )
+                    .map_err(invalid)?,)*
+                };
+                // A pair out of order names the field the request gave, not a default.
+                p.validate_given(given).map_err(|e| invalid(format!("params.{e}")))?;
+                Ok(p)
+            }
+        }
+    };
+}
+
+crate::spec_params!(wire_params);
+
+impl WireParams {
     /// `set` with every field given.
     pub const ALL_SET: u32 = (1 << Self::FIELDS.len()) - 1;
 
     /// The `set` bit of the field named `name` (SPEC §11 name), if there is one.
     pub fn bit(name: &str) -> Option<u32> {
         Self::FIELDS.iter().position(|f| *f == name).map(|i| 1 << i)
-    }
-}
-
-impl From<&Params> for WireParams {
-    fn from(p: &Params) -> Self {
-        WireParams {
-            rover_radius: p.rover_radius,
-            marker_size: p.marker_size,
-            marker_height: p.marker_height,
-            viewer_radius: p.viewer_radius,
-            safety_margin: p.safety_margin,
-            z_min: p.z_min,
-            z_max: p.z_max,
-            camera_pitch: p.camera_pitch,
-            t_vs: p.t_vs.into(),
-            f_h: p.f_h,
-            f_v: p.f_v,
-            rho_min: p.rho_min,
-            rho_max: p.rho_max,
-            kappa: p.kappa,
-            lambda: p.lambda,
-            perimeter_points: p.perimeter_points,
-            model: match p.model {
-                ModelKind::Paper => 0,
-                ModelKind::Anisotropic => 1,
-                ModelKind::Learned => 2,
-            },
-            set: WireParams::ALL_SET,
-            reserved: 0,
-        }
-    }
-}
-
-impl TryFrom<&WireParams> for Params {
-    type Error = Rejection;
-
-    /// Decodes and validates (SPEC §11 ranges): `invalid_params` names the field.
-    /// Fields whose `set` bit is clear take the SPEC default.
-    fn try_from(w: &WireParams) -> Result<Self, Rejection> {
-        if w.set & !WireParams::ALL_SET != 0 || w.reserved != 0 {
-            return Err(Rejection::new(
-                Status::InvalidParams,
-                format!(
-                    "params.set = {:#x} has bits above {:#x}, or params.reserved = {} is not 0",
-                    w.set,
-                    WireParams::ALL_SET,
-                    w.reserved
-                ),
-            ));
-        }
-        // Unset fields take their default before anything is decoded, so their
-        // bits (whatever a peer left there) are never looked at.
-        let d = WireParams::from(&Params::default());
-        let given = |name: &str| w.set & WireParams::bit(name).unwrap_or(0) != 0;
-        macro_rules! pick {
-            ($($field:ident),*) => {
-                WireParams { $($field: if given(stringify!($field)) { w.$field } else { d.$field },)* set: w.set, reserved: 0 }
-            };
-        }
-        let w = &pick!(
-            rover_radius,
-            marker_size,
-            marker_height,
-            viewer_radius,
-            safety_margin,
-            z_min,
-            z_max,
-            camera_pitch,
-            t_vs,
-            f_h,
-            f_v,
-            rho_min,
-            rho_max,
-            kappa,
-            lambda,
-            perimeter_points,
-            model
-        );
-        let model = match w.model {
-            0 => ModelKind::Paper,
-            1 => ModelKind::Anisotropic,
-            2 => ModelKind::Learned,
-            m => {
-                return Err(Rejection::new(
-                    Status::InvalidParams,
-                    format!("params.model = {m} is not a model (0 paper, 1 anisotropic, 2 learned)"),
-                ));
-            }
-        };
-        let p = Params {
-            rover_radius: w.rover_radius,
-            perimeter_points: w.perimeter_points,
-            marker_size: w.marker_size,
-            marker_height: w.marker_height,
-            viewer_radius: w.viewer_radius,
-            safety_margin: w.safety_margin,
-            z_min: w.z_min,
-            z_max: w.z_max,
-            camera_pitch: w.camera_pitch,
-            t_vs: Vector3::from(w.t_vs),
-            f_h: w.f_h,
-            f_v: w.f_v,
-            rho_min: w.rho_min,
-            rho_max: w.rho_max,
-            kappa: w.kappa,
-            lambda: w.lambda,
-            model,
-        };
-        // A pair out of order names the field the request gave, not a default.
-        p.validate_given(given).map_err(|e| Rejection::new(Status::InvalidParams, format!("params.{e}")))?;
-        Ok(p)
     }
 }
 
@@ -336,7 +274,6 @@ impl RendezvousRequest {
 
     /// The header to send.
     pub fn header(&self, mode: Mode, request_id: u64, reply_to: [u64; 2]) -> RendezvousRequestHeader {
-        let index = Algorithm::ALL.iter().position(|a| *a == self.algorithm).expect("every algorithm has a tag");
         RendezvousRequestHeader {
             request_id,
             map_id: self.map,
@@ -347,8 +284,8 @@ impl RendezvousRequest {
             mean: self.belief.mean.into(),
             cov: self.belief.cov.to_rows(),
             params: WireParams::from(&self.params),
-            algorithm: index as u32,
-            mode: mode as u32,
+            algorithm: self.algorithm.code(),
+            mode: mode.code(),
             reply_to,
         }
     }
@@ -361,23 +298,14 @@ impl RendezvousRequest {
     /// Decodes and validates every field; the map-dependent checks (id, version,
     /// deltas applying cleanly) are the daemon's.
     pub fn decode(h: &RendezvousRequestHeader, records: &[WireDelta]) -> Result<(Self, Mode), Rejection> {
-        let mode = match h.mode {
-            0 => Mode::Solve,
-            1 => Mode::Check,
-            m => {
-                return Err(Rejection::new(
-                    Status::MalformedRequest,
-                    format!("mode = {m} must be 0 (solve) or 1 (check)"),
-                ));
-            }
-        };
-        let algorithm = *Algorithm::ALL.get(h.algorithm as usize).ok_or_else(|| {
+        let mode = Mode::try_from(h.mode).map_err(|e| {
+            let codes: Vec<String> = Mode::ALL.iter().map(|m| format!("{} ({m})", m.code())).collect();
+            Rejection::new(Status::MalformedRequest, format!("mode = {} must be {}", e.value, codes.join(" or ")))
+        })?;
+        let algorithm = Algorithm::try_from(h.algorithm).map_err(|e| {
             Rejection::new(
                 Status::InvalidAlgorithm,
-                format!(
-                    "algorithm = {} is not an algorithm (0 dyfos, 1 dyfos-scipy, 2 brute, 3 random, 4 center)",
-                    h.algorithm
-                ),
+                format!("algorithm = {} is not an algorithm ({})", e.value, Algorithm::listing()),
             )
         })?;
         let belief =
@@ -466,16 +394,6 @@ pub struct RendezvousReply {
     pub detail: Detail,
 }
 
-fn stop_code(s: StopReason) -> u32 {
-    match s {
-        StopReason::Finished => 0,
-        StopReason::MaxGenerations => 1,
-        StopReason::Budget => 2,
-        StopReason::Deadline => 3,
-        StopReason::Abandoned => 4,
-    }
-}
-
 /// The outcome of a check-mode request: everything validated, nothing searched.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RendezvousCheck {
@@ -490,9 +408,9 @@ impl RendezvousReply {
         let e = answer.evaluations;
         RendezvousReply {
             status: Status::Ok as u32,
-            algorithm: Algorithm::ALL.iter().position(|a| *a == answer.algorithm).unwrap_or(0) as u32,
-            stop: stop_code(answer.stop),
-            mode: Mode::Solve as u32,
+            algorithm: answer.algorithm.code(),
+            stop: answer.stop.code(),
+            mode: Mode::Solve.code(),
             request_id,
             map_version: answer.map_version,
             x: answer.x.to_array(),
@@ -515,7 +433,7 @@ impl RendezvousReply {
     pub fn checked(request_id: u64, map_version: u64) -> Self {
         RendezvousReply {
             status: Status::Ok as u32,
-            mode: Mode::Check as u32,
+            mode: Mode::Check.code(),
             request_id,
             map_version,
             error_index: u64::MAX,
@@ -549,17 +467,8 @@ impl RendezvousReply {
             return Err(self.rejection());
         }
         let bad = |what: String| Rejection::new(Status::MalformedRequest, format!("malformed reply: {what}"));
-        let algorithm = *Algorithm::ALL
-            .get(self.algorithm as usize)
-            .ok_or_else(|| bad(format!("algorithm = {}", self.algorithm)))?;
-        let stop = match self.stop {
-            0 => StopReason::Finished,
-            1 => StopReason::MaxGenerations,
-            2 => StopReason::Budget,
-            3 => StopReason::Deadline,
-            4 => StopReason::Abandoned,
-            s => return Err(bad(format!("stop = {s}"))),
-        };
+        let algorithm = Algorithm::try_from(self.algorithm).map_err(|e| bad(format!("algorithm = {}", e.value)))?;
+        let stop = StopReason::try_from(self.stop).map_err(|e| bad(format!("stop = {}", e.value)))?;
         let [i, j, k, w] = self.sensor_quaternion;
         let e = self.evaluations;
         Ok(Answer {
@@ -592,6 +501,8 @@ impl RendezvousReply {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::Vector3;
+    use crate::params::ModelKind;
     use crate::world::Sun;
 
     fn request() -> RendezvousRequest {

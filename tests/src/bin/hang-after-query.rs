@@ -1,5 +1,5 @@
 //! `hang-after-query`: a client that sends one slow query and then hangs, for the
-//! test to kill while its reply listener is registered (`tests/tests/hostile.rs`).
+//! test to kill while its reply listener is registered (`tests/tests/it/hostile.rs`).
 //!
 //! ```text
 //! hang-after-query PREFIX DOMAIN MAP SCENARIO

@@ -1,4 +1,4 @@
-//! `soak-client`: a process of the soak test (`tests/tests/soak.rs`).
+//! `soak-client`: a process of the soak test (`tests/tests/it/soak.rs`).
 //!
 //! ```text
 //! soak-client query --prefix P --domain D --id N --log FILE --stop FILE

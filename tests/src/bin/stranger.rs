@@ -1,5 +1,5 @@
 //! `stranger`: a host without the mission's credentials, for the link tests
-//! (`tests/tests/hosts.rs`), run in a network namespace of its own.
+//! (`tests/tests/it/hosts.rs`), run in a network namespace of its own.
 //!
 //! ```text
 //! stranger silent ADDR N          hold N TCP connections to ADDR open, saying nothing;

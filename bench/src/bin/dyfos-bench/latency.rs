@@ -16,11 +16,13 @@ use dyfos_bench::latency::{
 };
 use dyfos_bench::svg::{Series, line_plot};
 use dyfos_client::{Client, ClientConfig, RendezvousError};
+use dyfos_process::child::KillOnDrop;
+use dyfos_service::launch::DyfosdCommand;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::io::{BufRead, BufReader, Write as _};
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdout, Command, ExitStatus, Stdio};
+use std::process::{ChildStdout, Command, ExitStatus, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -247,37 +249,10 @@ pub fn worker(args: &WorkerArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A child process killed on drop unless it was waited for.
-struct Guard(Option<Child>);
-
-impl Guard {
-    fn id(&self) -> u32 {
-        self.0.as_ref().map_or(0, Child::id)
-    }
-
-    fn wait_timeout(&mut self, limit: Duration) -> anyhow::Result<ExitStatus> {
-        let child = self.0.as_mut().context("process already reaped")?;
-        let start = Instant::now();
-        loop {
-            if let Some(status) = child.try_wait()? {
-                self.0 = None;
-                return Ok(status);
-            }
-            if start.elapsed() > limit {
-                bail!("process {} did not exit within {limit:?}", child.id());
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    }
-}
-
-impl Drop for Guard {
-    fn drop(&mut self) {
-        if let Some(mut c) = self.0.take() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
+/// Waits up to `limit` for `child` to exit.
+fn wait_exit(child: &mut KillOnDrop, limit: Duration) -> anyhow::Result<ExitStatus> {
+    let id = child.id();
+    child.wait_timeout(limit).with_context(|| format!("process {id} did not exit within {limit:?}"))
 }
 
 /// Everything the run shares: paths, names, the requests.
@@ -462,13 +437,13 @@ impl Bench<'_> {
                     .stderr(Stdio::inherit())
                     .spawn()
                     .with_context(|| format!("cannot start {}", self.exe.display()))?;
-                children.push(Guard(Some(child)));
+                children.push(KillOnDrop::new(child));
                 outputs.push((g, out));
             }
         }
         // Everyone connected and warm: start together.
         for c in &mut children {
-            let stdout: ChildStdout = c.0.as_mut().and_then(|c| c.stdout.take()).context("worker stdout")?;
+            let stdout: ChildStdout = c.child_mut().and_then(|c| c.stdout.take()).context("worker stdout")?;
             let mut line = String::new();
             BufReader::new(stdout).read_line(&mut line)?;
             if line.trim() != "ready" {
@@ -476,7 +451,7 @@ impl Bench<'_> {
             }
         }
         for c in &mut children {
-            let stdin = c.0.as_mut().and_then(|c| c.stdin.as_mut()).context("worker stdin")?;
+            let stdin = c.child_mut().and_then(|c| c.stdin.as_mut()).context("worker stdin")?;
             stdin.write_all(b"go\n")?;
             stdin.flush()?;
         }
@@ -485,7 +460,7 @@ impl Bench<'_> {
         let limit = Duration::from_secs_f64(a.seconds * 3.0) + TIMEOUT;
         let mut runs: Vec<Vec<RunSamples>> = vec![Vec::new(); groups.len()];
         for (c, (g, out)) in children.iter_mut().zip(&outputs) {
-            let status = c.wait_timeout(limit)?;
+            let status = wait_exit(c, limit)?;
             if !status.success() {
                 bail!("client process of `{label}` failed ({status})");
             }
@@ -528,29 +503,24 @@ impl Bench<'_> {
 }
 
 /// Starts `dyfosd` for the bench and waits until it serves.
-fn start_daemon(b: &Bench, dyfosd: &Path, extra: &[String], state: &Path, log: &Path) -> anyhow::Result<Guard> {
+fn start_daemon(b: &Bench, dyfosd: &Path, extra: &[String], state: &Path, log: &Path) -> anyhow::Result<KillOnDrop> {
     let log_file = std::fs::File::create(log).with_context(|| format!("cannot create {}", log.display()))?;
-    let child = Command::new(dyfosd)
-        .args(["--prefix", &b.prefix, "--domain", &b.domain, "--state-dir"])
-        .arg(state)
+    DyfosdCommand::new(dyfosd, &b.prefix, state)
+        .domain(&b.domain)
+        .log(&std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into()), log_file)
         .args(&b.args.daemon_args)
         .args(extra)
-        .env("RUST_LOG", std::env::var("RUST_LOG").unwrap_or_else(|_| "warn".into()))
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(log_file)
         .spawn()
-        .with_context(|| format!("cannot start {}", dyfosd.display()))?;
-    Ok(Guard(Some(child)))
+        .with_context(|| format!("cannot start {}", dyfosd.display()))
 }
 
 /// SIGTERM, then wait for a clean exit.
-fn stop_daemon(daemon: &mut Guard) -> anyhow::Result<ExitStatus> {
+fn stop_daemon(daemon: &mut KillOnDrop) -> anyhow::Result<ExitStatus> {
     let ok = Command::new("kill").arg("-TERM").arg(daemon.id().to_string()).status().is_ok_and(|s| s.success());
     if !ok {
         bail!("could not send SIGTERM to dyfosd ({})", daemon.id());
     }
-    daemon.wait_timeout(TIMEOUT)
+    wait_exit(daemon, TIMEOUT)
 }
 
 /// Shared-memory files of `domain` left in /dev/shm (iceoryx2's per-domain node

@@ -3,12 +3,14 @@
 //! process; then, through a real `dyfosd`, loading a building `.bt`, 10 000-cell
 //! updates, a restart and queries, with bytes per cell and the daemon's memory.
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use dyfos_bench::evaluation::{Contender, Timing, duration, evaluate};
 use dyfos_bench::numerical::{NumericalConfig, numerical_map, voxelized};
 use dyfos_bench::octomap::{Building, RESOLUTION, ROOM_CELLS};
 use dyfos_bench::stats::Summary;
 use dyfos_client::{Client, ClientConfig};
+use dyfos_process::child::KillOnDrop;
+use dyfos_service::launch::DyfosdCommand;
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::math::Point3;
 use dyfos_shared::posterior::Belief;
@@ -18,7 +20,7 @@ use dyfos_shared::world::octomap::{Octomap, write_bt};
 use dyfos_shared::world::{Bounds, MapDelta, Sun, VoxelBlock, World};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+
 use std::time::{Duration, Instant};
 
 /// Flags of `dyfos-bench octomap`.
@@ -141,49 +143,28 @@ fn query_costs(args: &OctomapArgs) -> anyhow::Result<String> {
     Ok(out)
 }
 
-/// A child process killed on drop unless it was waited for.
-struct Daemon(Option<Child>);
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        if let Some(mut c) = self.0.take() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
+/// `dyfosd`, killed on drop unless it was stopped.
+struct Daemon(KillOnDrop);
 
 impl Daemon {
     fn start(dyfosd: &Path, prefix: &str, domain: &str, state: &Path, log: &Path) -> anyhow::Result<Daemon> {
         let log = std::fs::OpenOptions::new().create(true).append(true).open(log)?;
-        let child = Command::new(dyfosd)
-            .args(["--prefix", prefix, "--domain", domain, "--state-dir"])
-            .arg(state)
-            .env("RUST_LOG", "info")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(log)
+        let child = DyfosdCommand::new(dyfosd, prefix, state)
+            .domain(domain)
+            .log("info", log)
             .spawn()
             .with_context(|| format!("cannot start {}", dyfosd.display()))?;
-        Ok(Daemon(Some(child)))
+        Ok(Daemon(child))
     }
 
     fn pid(&self) -> u32 {
-        self.0.as_ref().map_or(0, Child::id)
+        self.0.id()
     }
 
     /// SIGTERM and a clean exit.
     fn stop(&mut self) -> anyhow::Result<()> {
-        let mut child = self.0.take().context("not running")?;
-        Command::new("kill").arg("-TERM").arg(child.id().to_string()).status()?;
-        let started = Instant::now();
-        while child.try_wait()?.is_none() {
-            if started.elapsed() > Duration::from_secs(60) {
-                bail!("dyfosd did not stop within 60 s");
-            }
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        Ok(())
+        anyhow::ensure!(self.0.is_running(), "not running");
+        self.0.terminate(Duration::from_secs(60)).map(drop).context("dyfosd did not stop within 60 s")
     }
 
     /// Resident memory, MiB.

@@ -16,9 +16,10 @@ use dyfos::{
     DYFOS_STATUS_OK, dyfos_client, dyfos_client_check, dyfos_client_connect, dyfos_client_free,
     dyfos_rendezvous_request, dyfos_rendezvous_request_init,
 };
+use dyfos_process::child::KillOnDrop;
 use std::ffi::CString;
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 const TIMEOUT: Duration = Duration::from_secs(10);
@@ -53,12 +54,11 @@ fn args() -> Result<Args, String> {
 }
 
 /// The daemon, stopped with SIGTERM (and its state directory removed) on drop.
-struct Daemon(Child, PathBuf);
+struct Daemon(KillOnDrop, PathBuf);
 
 impl Drop for Daemon {
     fn drop(&mut self) {
-        let _ = Command::new("kill").arg("-TERM").arg(self.0.id().to_string()).status();
-        let _ = self.0.wait();
+        self.0.terminate(TIMEOUT);
         let _ = std::fs::remove_dir_all(&self.1);
     }
 }
@@ -82,7 +82,7 @@ fn run() -> Result<(), String> {
         .stdout(Stdio::null())
         .spawn()
         .map_err(|e| format!("cannot start {}: {e}", a.dyfosd.display()))?;
-    let _daemon = Daemon(child, state);
+    let _daemon = Daemon(KillOnDrop::new(child), state);
 
     let config = ClientConfig {
         prefix: prefix.clone(),

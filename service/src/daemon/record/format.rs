@@ -2,8 +2,8 @@
 //! the JSON of each message, written by the recorder and read back by `dyfos
 //! replay` bit for bit.
 
-use dyfos_shared::answer::Algorithm;
-use dyfos_shared::params::{ModelKind, Params};
+use dyfos_shared::answer::{Algorithm, StopReason};
+use dyfos_shared::params::Params;
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::wire::Status;
 use dyfos_shared::wire::map::{MapId, world_from_content};
@@ -100,15 +100,7 @@ pub fn json_schema(topic: &str) -> serde_json::Value {
 /// Every SPEC §11 parameter by its scenario name (what
 /// [`dyfos_shared::scenario::params_from_json`] reads back, bit for bit).
 pub fn params_to_json(p: &Params) -> serde_json::Value {
-    serde_json::json!({
-        "rover_radius": p.rover_radius, "perimeter_points": p.perimeter_points,
-        "marker_size": p.marker_size, "marker_height": p.marker_height,
-        "viewer_radius": p.viewer_radius, "safety_margin": p.safety_margin,
-        "z_min": p.z_min, "z_max": p.z_max, "camera_pitch": p.camera_pitch,
-        "t_vs": [p.t_vs.x, p.t_vs.y, p.t_vs.z], "f_h": p.f_h, "f_v": p.f_v,
-        "rho_min": p.rho_min, "rho_max": p.rho_max, "kappa": p.kappa, "lambda": p.lambda,
-        "model": match p.model { ModelKind::Paper => "paper", ModelKind::Anisotropic => "anisotropic", ModelKind::Learned => "learned" },
-    })
+    dyfos_shared::scenario::params_to_json(p)
 }
 
 /// A rendezvous request as recorded: the decoded, validated request.
@@ -233,16 +225,13 @@ pub struct RecordedReply {
     pub message: String,
 }
 
-/// The names of [`RendezvousReply::stop`] codes.
-const STOPS: [&str; 5] = ["finished", "max_generations", "budget", "deadline", "abandoned"];
-
 impl RecordedReply {
     /// The reply as sent.
     pub fn of(r: &RendezvousReply) -> Self {
         RecordedReply {
             status: Status::try_from(r.status).map_or_else(|_| format!("status_{}", r.status), |s| s.name().into()),
-            algorithm: Algorithm::ALL.get(r.algorithm as usize).map_or("?", |a| a.name()).to_string(),
-            stop: STOPS.get(r.stop as usize).copied().unwrap_or("?").to_string(),
+            algorithm: Algorithm::try_from(r.algorithm).map_or("?", Algorithm::name).to_string(),
+            stop: StopReason::try_from(r.stop).map_or("?", StopReason::name).to_string(),
             map_version: r.map_version,
             x: r.x,
             cost: r.cost,

@@ -210,7 +210,7 @@ fn demo_prints_the_ape_table_and_draws_each_run() {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["runs"].as_array().unwrap().len(), 3);
-    // One MCAP file per run (tests/tests/mission_mcap.rs checks their content):
+    // One MCAP file per run (tests/tests/it/mission_mcap.rs checks their content):
     // the rover's samples from the recorded trace, the answers from the viewer's log.
     for (arm, run) in ["dyfos", "center", "dead-reckoning"].iter().zip(summary["runs"].as_array().unwrap()) {
         let bytes = std::fs::read(out_dir.join(format!("mission-{arm}-s1.mcap"))).unwrap();

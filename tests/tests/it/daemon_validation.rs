@@ -3,9 +3,9 @@
 
 use dyfos_client::prelude::*;
 use dyfos_shared::limits::{MAX_DELTAS_PER_MESSAGE, MAX_INLINE_DELTAS, MAX_UPLOAD_CHUNKS};
+use dyfos_shared::wire::Rejection;
 use dyfos_shared::wire::map::{MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, encode_deltas, tag};
 use dyfos_shared::wire::rendezvous::{Mode, RendezvousRequestHeader, WireParams};
-use dyfos_shared::wire::{ANY_VERSION, Rejection};
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
 use dyfos_tests::{PATIENCE, RawClient, Sandbox};
 
@@ -17,32 +17,72 @@ fn rejection(h: &MapReplyHeader) -> Rejection {
     Rejection::from_wire(h.status, &h.detail, h.error_index)
 }
 
-#[test]
-fn every_bad_request_gets_its_code_and_leaves_the_map_unchanged() {
-    let sandbox = Sandbox::new("bad");
-    let _daemon = sandbox.start_daemon(&[]);
-    let mut client = sandbox.client();
-    let raw = RawClient::open(&sandbox);
-    let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
-    client.create_map(1, bounds, Sun::new(0.7, 2.1).unwrap(), PATIENCE).unwrap();
-    let crate_ = Obstacle::Box(AxisBox { min: na::Point3::new(4.0, 4.0, 0.0), max: na::Point3::new(5.0, 6.0, 3.0) });
-    let v = client
-        .apply(
-            1,
-            Some(0),
-            &[
-                MapDelta::UpsertObstacle { id: 1, obstacle: pole(2.0) },
-                MapDelta::UpsertObstacle { id: 2, obstacle: crate_ },
-            ],
-            PATIENCE,
-        )
-        .unwrap();
-    assert_eq!(v, 2);
-    let before = client.snapshot(1, PATIENCE).unwrap();
+/// A daemon with map 1 (two obstacles, version 2), a client, a raw client, and
+/// the map as it is before any bad request.
+/// Fields drop in order: the clients, then the daemon, then the sandbox's files.
+struct Fixture {
+    raw: RawClient,
+    client: Client,
+    _daemon: dyfos_tests::DaemonProcess,
+    _sandbox: Sandbox,
+    bounds: Bounds,
+    before: World,
+}
 
-    // --- rendezvous requests -------------------------------------------------
-    let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
-    let good = RendezvousRequest { expected_version: Some(2), ..RendezvousRequest::new(1, belief) };
+impl Fixture {
+    fn new(name: &str) -> Fixture {
+        let sandbox = Sandbox::new(name);
+        let daemon = sandbox.start_daemon(&[]);
+        let mut client = sandbox.client();
+        let raw = RawClient::open(&sandbox);
+        let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
+        client.create_map(1, bounds, Sun::new(0.7, 2.1).unwrap(), PATIENCE).unwrap();
+        let crate_ =
+            Obstacle::Box(AxisBox { min: na::Point3::new(4.0, 4.0, 0.0), max: na::Point3::new(5.0, 6.0, 3.0) });
+        let deltas = [
+            MapDelta::UpsertObstacle { id: 1, obstacle: pole(2.0) },
+            MapDelta::UpsertObstacle { id: 2, obstacle: crate_ },
+        ];
+        assert_eq!(client.apply(1, Some(0), &deltas, PATIENCE).unwrap(), 2);
+        let before = client.snapshot(1, PATIENCE).unwrap();
+        Fixture { raw, client, _daemon: daemon, _sandbox: sandbox, bounds, before }
+    }
+
+    /// Fails, naming the case, if the map changed.
+    fn assert_unchanged(&mut self, what: &str) {
+        assert_eq!(self.client.snapshot(1, PATIENCE).unwrap(), self.before, "{what} changed the map");
+    }
+
+    /// How many errors with `status` the daemon counted.
+    fn errors(&mut self, status: Status) -> u64 {
+        let stats = self.client.stats(PATIENCE).unwrap();
+        stats.errors.iter().find(|(c, _)| *c == status).map_or(0, |(_, n)| *n)
+    }
+}
+
+fn belief() -> Belief {
+    Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap()
+}
+
+/// Delta records every service must refuse, by name.
+fn bad_records() -> (Vec<WireDelta>, Vec<WireDelta>, Vec<WireDelta>) {
+    let remove_unknown = encode_deltas(&[MapDelta::RemoveObstacle { id: 1 }, MapDelta::RemoveObstacle { id: 99 }]);
+    let nan_pole = encode_deltas(&[MapDelta::UpsertObstacle { id: 3, obstacle: pole(f64::NAN) }]);
+    let truncated_run = vec![WireDelta {
+        tag: tag::VOXEL_RUN,
+        flag: 1,
+        values: [0.5, 0.0, 0.0, 0.0, 0.0, 0.0],
+        cell: [3, 0, 0],
+        ..Default::default()
+    }];
+    (remove_unknown, nan_pole, truncated_run)
+}
+
+#[test]
+fn every_bad_rendezvous_request_gets_its_code_and_leaves_the_map_unchanged() {
+    let mut f = Fixture::new("bad-rendezvous");
+    let raw = &f.raw;
+    let good = RendezvousRequest { expected_version: Some(2), ..RendezvousRequest::new(1, belief()) };
     let h = good.header(Mode::Solve, 1, [0, 0]);
     assert_eq!(raw.rendezvous(h, &[]).status, Status::Ok as u32, "the unmodified request is fine");
     let params = |f: fn(&mut WireParams)| {
@@ -55,15 +95,7 @@ fn every_bad_request_gets_its_code_and_leaves_the_map_unchanged() {
         f(&mut c);
         RendezvousRequestHeader { cov: c, ..h }
     };
-    let remove_unknown = encode_deltas(&[MapDelta::RemoveObstacle { id: 1 }, MapDelta::RemoveObstacle { id: 99 }]);
-    let nan_pole = encode_deltas(&[MapDelta::UpsertObstacle { id: 3, obstacle: pole(f64::NAN) }]);
-    let truncated_run = vec![WireDelta {
-        tag: tag::VOXEL_RUN,
-        flag: 1,
-        values: [0.5, 0.0, 0.0, 0.0, 0.0, 0.0],
-        cell: [3, 0, 0],
-        ..Default::default()
-    }];
+    let (remove_unknown, nan_pole, truncated_run) = bad_records();
     let bad_tag = vec![WireDelta { tag: 42, ..Default::default() }];
     let too_many = vec![WireDelta { tag: tag::CLEAR, ..Default::default() }; MAX_INLINE_DELTAS + 1];
     let cases: Vec<(&str, RendezvousRequestHeader, Vec<WireDelta>, Status)> = vec![
@@ -90,34 +122,50 @@ fn every_bad_request_gets_its_code_and_leaves_the_map_unchanged() {
         ("too many deltas", h, too_many, Status::OverCapacity),
     ];
     for (what, header, records, expected) in cases {
-        let reply = raw.rendezvous(header, &records);
+        let reply = f.raw.rendezvous(header, &records);
         let got = Status::try_from(reply.status).unwrap();
         assert_eq!(got, expected, "{what}: {}", reply.detail.text());
         assert!(!reply.detail.text().is_empty(), "{what}: an error says why");
-        assert_eq!(client.snapshot(1, PATIENCE).unwrap(), before, "{what} changed the map");
+        f.assert_unchanged(what);
     }
     // A delta error names the failing delta.
-    let reply = raw.rendezvous(h, &remove_unknown);
+    let reply = f.raw.rendezvous(h, &remove_unknown);
     assert_eq!(reply.error_index, 1);
     assert!(reply.detail.text().contains("no obstacle with id 99"), "{}", reply.detail.text());
+    // The daemon counted every error by its code and is still serving.
+    assert_eq!(f.errors(Status::InvalidBelief), 5);
+    assert_eq!(f.client.check(&RendezvousRequest::new(1, belief()), PATIENCE).unwrap().map_version, 2);
+}
 
-    // --- map requests ---------------------------------------------------------
+/// `upload(id, index, count)`: chunk `index` of `count` of upload `id` of map 1,
+/// replacing it with one pole (id 9).
+fn upload(bounds: Bounds, id: u64, index: u32, count: u32) -> MapRequestHeader {
+    MapRequest::Upload {
+        map: 1,
+        upload_id: id,
+        chunk_index: index,
+        chunk_count: count,
+        replace: true,
+        expected_version: None,
+        bounds,
+        sun: Sun::new(0.1, 0.0).unwrap(),
+        deltas: vec![MapDelta::UpsertObstacle { id: 9, obstacle: pole(-3.0) }],
+    }
+    .header(2, [0, 0])
+}
+
+fn one_pole() -> Vec<WireDelta> {
+    encode_deltas(&[MapDelta::UpsertObstacle { id: 9, obstacle: pole(-3.0) }])
+}
+
+#[test]
+fn every_bad_map_request_gets_its_code_and_leaves_the_map_unchanged() {
+    let mut f = Fixture::new("bad-map");
+    let bounds = f.bounds;
+    let (remove_unknown, nan_pole, truncated_run) = bad_records();
     let apply = MapRequest::Apply { map: 1, expected_version: Some(2), deltas: vec![] }.header(1, [0, 0]);
-    let upload = |id: u64, index: u32, count: u32| {
-        MapRequest::Upload {
-            map: 1,
-            upload_id: id,
-            chunk_index: index,
-            chunk_count: count,
-            replace: true,
-            expected_version: None,
-            bounds,
-            sun: Sun::new(0.1, 0.0).unwrap(),
-            deltas: vec![MapDelta::UpsertObstacle { id: 9, obstacle: pole(-3.0) }],
-        }
-        .header(2, [0, 0])
-    };
-    let one_pole = encode_deltas(&[MapDelta::UpsertObstacle { id: 9, obstacle: pole(-3.0) }]);
+    let upload = |id, index, count| upload(bounds, id, index, count);
+    let one_pole = one_pole();
     let over = vec![WireDelta { tag: tag::CLEAR, ..Default::default() }; MAX_DELTAS_PER_MESSAGE + 1];
     let create = MapRequest::Create { map: 1, bounds, sun: Sun::new(0.1, 0.0).unwrap() }.header(3, [0, 0]);
     let map_cases: Vec<(&str, MapRequestHeader, Vec<WireDelta>, Status)> = vec![
@@ -162,14 +210,22 @@ fn every_bad_request_gets_its_code_and_leaves_the_map_unchanged() {
         ),
     ];
     for (what, header, records, expected) in map_cases {
-        let (reply, _) = raw.map(header, &records);
+        let (reply, _) = f.raw.map(header, &records);
         let r = rejection(&reply);
         assert_eq!(Status::try_from(reply.status).unwrap(), expected, "{what}: {r}");
         assert!(!r.message.is_empty(), "{what}");
-        assert_eq!(client.snapshot(1, PATIENCE).unwrap(), before, "{what} changed the map");
+        f.assert_unchanged(what);
     }
+}
 
-    // Chunk sequences: duplicated, out of order, abandoned (incomplete).
+/// Chunk sequences: duplicated, out of order, abandoned (incomplete), then a
+/// completed upload replacing the map whole.
+#[test]
+fn upload_chunks_out_of_sequence_are_refused_and_only_a_complete_upload_changes_the_map() {
+    let mut f = Fixture::new("bad-chunks");
+    let (bounds, one_pole) = (f.bounds, one_pole());
+    let upload = |id, index, count| upload(bounds, id, index, count);
+    let raw = &f.raw;
     let status = |h: MapRequestHeader| Status::try_from(raw.map(h, &one_pole).0.status).unwrap();
     assert_eq!(status(upload(10, 0, 3)), Status::Ok);
     assert_eq!(status(upload(10, 0, 3)), Status::ChunkDuplicate);
@@ -179,20 +235,16 @@ fn every_bad_request_gets_its_code_and_leaves_the_map_unchanged() {
     // A new upload of the same map supersedes it: its remaining chunk is refused.
     assert_eq!(status(upload(11, 0, 2)), Status::Ok);
     assert_eq!(status(upload(10, 2, 3)), Status::ChunkIncomplete);
-    assert_eq!(client.snapshot(1, PATIENCE).unwrap(), before, "incomplete uploads changed the map");
+    f.assert_unchanged("an incomplete upload");
     // Completing the new one replaces the map whole, as one change.
-    assert_eq!(status(upload(11, 1, 2)), Status::Ok);
-    let replaced = client.snapshot(1, PATIENCE).unwrap();
-    assert_eq!(replaced.version(), before.version() + 1);
+    let raw = &f.raw;
+    assert_eq!(Status::try_from(raw.map(upload(11, 1, 2), &one_pole).0.status).unwrap(), Status::Ok);
+    let replaced = f.client.snapshot(1, PATIENCE).unwrap();
+    assert_eq!(replaced.version(), f.before.version() + 1);
     assert_eq!(replaced.obstacles().keys().copied().collect::<Vec<_>>(), vec![9]);
-
-    // The daemon counted every error by its code and is still serving.
-    let stats = client.stats(PATIENCE).unwrap();
-    let count = |s: Status| stats.errors.iter().find(|(c, _)| *c == s).map_or(0, |(_, n)| *n);
-    assert_eq!(count(Status::InvalidBelief), 5);
-    assert_eq!(count(Status::ChunkIncomplete), 1);
-    assert_eq!(client.check(&RendezvousRequest::new(1, belief), PATIENCE).unwrap().map_version, replaced.version());
-    let _ = ANY_VERSION;
+    assert_eq!(f.errors(Status::ChunkIncomplete), 1);
+    let check = f.client.check(&RendezvousRequest::new(1, belief()), PATIENCE).unwrap();
+    assert_eq!(check.map_version, replaced.version());
 }
 
 #[test]

@@ -11,7 +11,7 @@
 //!
 //! ```text
 //! DYFOS_SOAK_SECS=1800 DYFOS_SOAK_REPORT=/tmp/soak.json \
-//!     cargo test -p dyfos-tests --test soak -- --nocapture
+//!     cargo test -p dyfos-tests --test it soak:: -- --nocapture
 //! ```
 //!
 //! Environment: `DYFOS_SOAK_SECS` (duration, default 20), `DYFOS_SOAK_CLIENTS`
@@ -23,7 +23,7 @@
 use dyfos_client::prelude::*;
 use dyfos_service::search::SearchControl;
 use dyfos_tests::soak::{Outcome, Record, SoakMap, WRITER_MAP, WriterRecord, maps, read_log, request_of};
-use dyfos_tests::{ChildGuard, DaemonProcess, PATIENCE, Sandbox, bin, wait_for, without_micros};
+use dyfos_tests::{DaemonProcess, KillOnDrop, PATIENCE, Sandbox, bin, wait_for, without_micros};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::{BTreeMap, BTreeSet};
@@ -62,7 +62,7 @@ impl Config {
 struct Proc {
     id: u32,
     log: PathBuf,
-    child: ChildGuard,
+    child: KillOnDrop,
 }
 
 fn spawn(mode: &str, id: u32, sandbox: &Sandbox, run: &Path) -> Proc {
@@ -79,7 +79,7 @@ fn spawn(mode: &str, id: u32, sandbox: &Sandbox, run: &Path) -> Proc {
         .stderr(stderr)
         .spawn()
         .expect("start soak-client");
-    Proc { id, log, child: ChildGuard(child) }
+    Proc { id, log, child: KillOnDrop::new(child) }
 }
 
 fn proc_status_kib(pid: u32, key: &str) -> Option<u64> {
@@ -233,8 +233,7 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
         if now >= next_client_kill && !started.is_empty() {
             let victim = live.swap_remove(started[rng.random_range(0..started.len())]);
             let mut guard = victim.child;
-            let _ = guard.0.kill(); // SIGKILL
-            let _ = guard.0.wait();
+            guard.kill(); // SIGKILL
             faults.client_kill9 += 1;
             if matches!(read_log::<Record>(&victim.log).last(), Some(Record::Sent(_))) {
                 faults.client_kill9_mid_request += 1;
@@ -270,7 +269,7 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
     let mut procs: Vec<Proc> = live;
     procs.push(writer);
     for p in &mut procs {
-        let status = wait_for("a soak process to stop", || p.child.0.try_wait().ok().flatten());
+        let status = wait_for("a soak process to stop", || p.child.try_wait());
         assert!(status.success(), "soak-client {} exited with {status}", p.id);
     }
     let inc = incarnations.last_mut().expect("one incarnation");

@@ -185,26 +185,73 @@ fn set_float(h: &mut RendezvousRequestHeader, field: usize, v: f64) {
     }
 }
 
-#[test]
-fn hostile_payloads_get_specific_errors_while_a_well_formed_client_is_served() {
-    let sandbox = Sandbox::new("hostile");
-    let mut daemon = sandbox.start_daemon(&[]);
-    let mut client = sandbox.client();
-    let example = scenario("example.json");
-    client.upload_map(1, &example.world, false, PATIENCE).unwrap();
-    let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
-    client.create_map(2, bounds, Sun::new(0.7, 2.1).unwrap(), PATIENCE).unwrap();
-    client.apply(2, Some(0), &[pole(1, 2.0), pole(2, -3.0)], PATIENCE).unwrap();
-    let mut model = client.snapshot(2, PATIENCE).unwrap();
-    let good = WellFormed::start(&sandbox, 1, example.clone());
-    let raw = RawClient::open(&sandbox);
-    let mut rng = ChaCha8Rng::seed_from_u64(6);
-    let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
-    let valid =
-        RendezvousRequest { algorithm: Algorithm::Center, budget: Some(500), ..RendezvousRequest::new(2, belief) }
-            .header(Mode::Solve, 1, [0, 0]);
-    let mut checked = 0u64;
+/// A daemon with map 1 (the example scenario's world, which a well-formed client
+/// queries the whole time) and map 2 (two poles, which hostile requests target), a
+/// raw client, and a valid request to make hostile. [`Hostile::finish`] checks
+/// that the well-formed client was served correctly throughout, map 1 is
+/// untouched, and the daemon stops cleanly without having panicked.
+struct Hostile {
+    good: WellFormed,
+    raw: RawClient,
+    client: Client,
+    daemon: dyfos_tests::DaemonProcess,
+    _sandbox: Sandbox,
+    example: Scenario,
+    bounds: Bounds,
+    /// Map 2 as the daemon must hold it.
+    model: World,
+    /// A valid rendezvous request on map 2.
+    valid: RendezvousRequestHeader,
+    /// An empty apply to map 2.
+    apply: MapRequestHeader,
+}
 
+impl Hostile {
+    fn new(name: &str) -> Hostile {
+        let sandbox = Sandbox::new(name);
+        let daemon = sandbox.start_daemon(&[]);
+        let mut client = sandbox.client();
+        let example = scenario("example.json");
+        client.upload_map(1, &example.world, false, PATIENCE).unwrap();
+        let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
+        client.create_map(2, bounds, Sun::new(0.7, 2.1).unwrap(), PATIENCE).unwrap();
+        client.apply(2, Some(0), &[pole(1, 2.0), pole(2, -3.0)], PATIENCE).unwrap();
+        let model = client.snapshot(2, PATIENCE).unwrap();
+        let good = WellFormed::start(&sandbox, 1, example.clone());
+        let raw = RawClient::open(&sandbox);
+        let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
+        let valid =
+            RendezvousRequest { algorithm: Algorithm::Center, budget: Some(500), ..RendezvousRequest::new(2, belief) }
+                .header(Mode::Solve, 1, [0, 0]);
+        let apply = MapRequest::Apply { map: 2, expected_version: None, deltas: vec![] }.header(0, [0, 0]);
+        Hostile { good, raw, client, daemon, _sandbox: sandbox, example, bounds, model, valid, apply }
+    }
+
+    /// The checks every hostile test ends with; `failed` is how many requests the
+    /// daemon must at least have counted as failed.
+    fn finish(self, failed: u64) {
+        let Hostile { good, raw, mut client, mut daemon, _sandbox, example, model, .. } = self;
+        assert!(good.finish() > 0);
+        assert_eq!(client.snapshot(1, PATIENCE).unwrap(), example.world);
+        assert_eq!(client.snapshot(2, PATIENCE).unwrap(), model, "map 2 differs from what its accepted batches make");
+        let stats = client.stats(PATIENCE).unwrap();
+        assert!(stats.requests_failed >= failed, "{stats:?}");
+        drop(client);
+        drop(raw);
+        assert!(daemon.terminate().success(), "{}", daemon.log());
+        let log = daemon.log();
+        assert!(!log.contains("panicked"), "{log}");
+    }
+}
+
+/// Random bytes, and valid requests with one field made random: each gets the
+/// status the wire decoder gives the same bytes.
+#[test]
+fn random_rendezvous_requests_get_the_decoders_code() {
+    let h = Hostile::new("hostile-rv");
+    let (raw, valid) = (&h.raw, h.valid);
+    let mut rng = ChaCha8Rng::seed_from_u64(6);
+    let mut checked = 0u64;
     // --- random bytes, and valid requests with one field made random -------------
     for i in 0..600u64 {
         let (header, records) = if i < 300 {
@@ -240,9 +287,20 @@ fn hostile_payloads_get_specific_errors_while_a_well_formed_client_is_served() {
     }
     assert!(checked > 300, "only {checked} requests were rejected by the decoder");
 
+    h.finish(checked);
+}
+
+/// Map requests: random bytes, then valid batches with one number made random.
+/// A local model of map 2 says what each must do; the map must end equal to it.
+#[test]
+fn random_map_requests_do_what_a_model_of_the_map_says() {
+    let mut h = Hostile::new("hostile-map");
+    let (raw, apply) = (&h.raw, h.apply);
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let mut model = h.model.clone();
+    let mut failed = 0u64;
     // Map requests: random bytes, then valid batches with one number made random.
     // A local model of map 2 says what each must do; the map must end equal to it.
-    let apply = MapRequest::Apply { map: 2, expected_version: None, deltas: vec![] }.header(0, [0, 0]);
     for i in 0..600u64 {
         let (header, records) = if i < 300 {
             let h = MapRequestHeader {
@@ -279,6 +337,7 @@ fn hostile_payloads_get_specific_errors_while_a_well_formed_client_is_served() {
         let (reply, _) = raw.map(header, &records);
         assert_eq!(reply.request_id, header.request_id);
         let got = status(reply.status);
+        failed += u64::from(got != Status::Ok);
         match MapRequest::decode(&header, &records) {
             Err(r) => assert_eq!(got, r.status, "{header:?} {records:?}: {}", reply.detail.text()),
             Ok(MapRequest::Apply { map: 2, deltas, .. }) => match model.apply(&deltas) {
@@ -297,8 +356,17 @@ fn hostile_payloads_get_specific_errors_while_a_well_formed_client_is_served() {
             ),
         }
     }
-    assert_eq!(client.snapshot(2, PATIENCE).unwrap(), model, "map 2 differs from what its accepted batches make");
+    h.model = model;
 
+    h.finish(failed);
+}
+
+/// NaN and infinities in every float of a request header, of every record kind
+/// (inline and through the map service) and of a map creation.
+#[test]
+fn nan_and_infinities_in_every_float_are_refused() {
+    let h = Hostile::new("hostile-nan");
+    let (raw, valid, apply, bounds) = (&h.raw, h.valid, h.apply, h.bounds);
     // --- NaN and infinities in every float -----------------------------------------
     for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
         for field in 0..29 {
@@ -347,6 +415,15 @@ fn hostile_payloads_get_specific_errors_while_a_well_formed_client_is_served() {
         }
     }
 
+    h.finish(3 * (29 + 2 * 20 + 6));
+}
+
+/// Huge and negative counts, unknown tags, counts that disagree with the records:
+/// a table of cases, each named.
+#[test]
+fn huge_and_negative_counts_unknown_tags_and_disagreeing_counts_get_their_codes() {
+    let h = Hostile::new("hostile-huge");
+    let (raw, valid, apply, bounds) = (&h.raw, h.valid, h.apply, h.bounds);
     // --- huge and negative counts, unknown tags, counts that disagree -------------
     let run = |n: i64, cells: &[[i64; 3]]| {
         let mut r = vec![WireDelta {
@@ -461,6 +538,15 @@ fn hostile_payloads_get_specific_errors_while_a_well_formed_client_is_served() {
         );
     }
 
+    h.finish(29);
+}
+
+/// Upload chunks out of order, duplicated, superseded or never finished, up to
+/// the daemon's limit of unfinished uploads: none changes a map.
+#[test]
+fn chunk_sequences_out_of_order_duplicated_or_never_finished_are_refused() {
+    let mut h = Hostile::new("hostile-chunk");
+    let (raw, bounds) = (&h.raw, h.bounds);
     // --- chunk sequences: out of order, duplicated, never finished -----------------
     let chunk = |upload_id: u64, map: MapId, index: u32, count: u32| {
         let h = MapRequest::Upload {
@@ -489,22 +575,11 @@ fn hostile_payloads_get_specific_errors_while_a_well_formed_client_is_served() {
     let started: Vec<Status> = (0..MAX_PENDING_UPLOADS as u64 + 1).map(|m| chunk(50 + m, 100 + m, 0, 2)).collect();
     let full = started.iter().position(|s| *s == Status::OverCapacity).expect("a limit on unfinished uploads");
     assert!(started[..full].iter().all(|s| *s == Status::Ok) && full < MAX_PENDING_UPLOADS, "{started:?}");
-    assert_eq!(client.snapshot(2, PATIENCE).unwrap(), model, "unfinished uploads changed map 2");
-    let err = client.snapshot(100, PATIENCE).unwrap_err();
+    assert_eq!(h.client.snapshot(2, PATIENCE).unwrap(), h.model, "unfinished uploads changed map 2");
+    let err = h.client.snapshot(100, PATIENCE).unwrap_err();
     assert_eq!(err.status(), Some(Status::UnknownMap), "an unfinished upload created a map: {err}");
 
-    // The well-formed client was served correctly all along; the daemon never
-    // panicked, still answers, and stops cleanly.
-    let served = good.finish();
-    assert!(served > 0);
-    assert_eq!(client.snapshot(1, PATIENCE).unwrap(), example.world.clone());
-    let stats = client.stats(PATIENCE).unwrap();
-    assert!(stats.requests_failed > 800, "{stats:?}");
-    drop(client);
-    drop(raw);
-    assert!(daemon.terminate().success(), "{}", daemon.log());
-    let log = daemon.log();
-    assert!(!log.contains("panicked"), "{log}");
+    h.finish(5);
 }
 
 /// Regression: chunks were buffered without limit until the upload completed, so
@@ -679,7 +754,7 @@ fn a_misbehaving_client_cannot_flood_the_daemons_log() {
                     scope.spawn(move || c.rendezvous(&brute, PATIENCE).map(|_| ()))
                 })
                 .collect();
-            let mut child = dyfos_tests::ChildGuard(
+            let mut child = dyfos_tests::KillOnDrop::new(
                 std::process::Command::new(bin("hang-after-query"))
                     .args([&sandbox.prefix, &sandbox.domain, "1"])
                     .arg(data("example.json"))
@@ -689,11 +764,10 @@ fn a_misbehaving_client_cannot_flood_the_daemons_log() {
                     .unwrap(),
             );
             let mut line = String::new();
-            let stdout = child.0.stdout.take().unwrap();
+            let stdout = child.child_mut().and_then(|c| c.stdout.take()).unwrap();
             std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut line).unwrap();
             assert_eq!(line.trim(), "sent");
-            let _ = child.0.kill();
-            let _ = child.0.wait();
+            child.kill();
             killed += 1;
             for b in busy {
                 b.join().unwrap().unwrap();

@@ -4,7 +4,7 @@ use dyfos_client::prelude::*;
 use dyfos_service::search::SearchControl;
 use dyfos_shared::answer::StopReason;
 use dyfos_shared::world::VerticalCylinder;
-use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, bin, data, wait_for, without_micros};
+use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, wait_for, without_micros};
 use std::io::Write;
 use std::process::{Command, Stdio};
 use std::sync::Arc;
@@ -122,7 +122,7 @@ fn several_client_processes_at_once_and_the_examples() {
     let _daemon = sandbox.start_daemon(&[]);
     let file = data("example.json");
     let seeds = [0u64, 1, 2, 3];
-    let queries: Vec<ChildGuard> = seeds
+    let queries: Vec<KillOnDrop> = seeds
         .iter()
         .map(|seed| {
             let child = sandbox
@@ -133,10 +133,10 @@ fn several_client_processes_at_once_and_the_examples() {
                 .stderr(Stdio::piped())
                 .spawn()
                 .expect("start dyfos query");
-            ChildGuard(child)
+            KillOnDrop::new(child)
         })
         .collect();
-    let examples: Vec<(&str, ChildGuard)> = ["rendezvous_once", "map_delta", "check_latency"]
+    let examples: Vec<(&str, KillOnDrop)> = ["rendezvous_once", "map_delta", "check_latency"]
         .into_iter()
         .map(|name| {
             let child = Command::new(bin(&format!("examples/{name}")))
@@ -145,12 +145,12 @@ fn several_client_processes_at_once_and_the_examples() {
                 .stderr(Stdio::piped())
                 .spawn()
                 .expect("start example");
-            (name, ChildGuard(child))
+            (name, KillOnDrop::new(child))
         })
         .collect();
     let s = scenario("example.json");
     for (seed, mut q) in seeds.into_iter().zip(queries) {
-        let out = q.0.wait_with_output_guarded();
+        let out = q.child_mut().expect("not reaped").wait_with_output_guarded();
         assert!(out.status.success(), "dyfos query --seed {seed}: {}", String::from_utf8_lossy(&out.stderr));
         let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON answer");
         let request = RendezvousRequest { seed, params: s.params, ..RendezvousRequest::new(0, s.belief) };
@@ -158,7 +158,7 @@ fn several_client_processes_at_once_and_the_examples() {
         assert_eq!(without_micros(json).to_string(), text(&expected), "seed {seed}");
     }
     for (name, mut child) in examples {
-        let out = child.0.wait_with_output_guarded();
+        let out = child.child_mut().expect("not reaped").wait_with_output_guarded();
         let stdout = String::from_utf8_lossy(&out.stdout);
         assert!(out.status.success(), "{name}: {}{stdout}", String::from_utf8_lossy(&out.stderr));
         match name {

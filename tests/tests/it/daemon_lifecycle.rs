@@ -3,7 +3,7 @@
 use dyfos_client::prelude::*;
 use dyfos_shared::answer::StopReason;
 use dyfos_shared::world::VerticalCylinder;
-use dyfos_tests::{ChildGuard, PATIENCE, Sandbox, bin, data, signal, wait_for, without_micros};
+use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, signal, wait_for, without_micros};
 use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -87,10 +87,9 @@ fn killing_a_client_mid_query_does_not_disturb_the_others() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let mut child = ChildGuard(child);
+    let mut child = KillOnDrop::new(child);
     wait_for("the doomed brute query to run", || (client.stats(PATIENCE).unwrap().running >= 1).then_some(()));
-    signal(child.0.id(), "KILL");
-    let _ = child.0.wait();
+    child.kill(); // SIGKILL, and reap
 
     // Others are served while (and after) the orphaned query runs.
     let request = RendezvousRequest { seed: 2, params: s.params, ..RendezvousRequest::new(1, s.belief) };
@@ -155,10 +154,9 @@ fn a_reply_meant_for_a_killed_client_never_reaches_the_next_one() {
             .unwrap()
     };
     for seed in ["1", "2"] {
-        let mut doomed = ChildGuard(query(&doomed_file, "1", &[]));
+        let mut doomed = KillOnDrop::new(query(&doomed_file, "1", &[]));
         wait_for("the doomed brute query to run", || (admin.stats(PATIENCE).unwrap().running >= 1).then_some(()));
-        signal(doomed.0.id(), "KILL");
-        let _ = doomed.0.wait();
+        doomed.kill(); // SIGKILL, and reap
         let mut next = query(&next_file, "2", &["--budget", "20000", "--seed", seed]).wait_with_output().unwrap();
         if !next.status.success() {
             // The orphaned reply is dropped; iceoryx2 may still close the channel it
@@ -329,13 +327,14 @@ fn a_client_stopped_and_continued_mid_query_still_gets_its_answer() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let mut child = ChildGuard(child);
+    let mut child = KillOnDrop::new(child);
     wait_for("the query to run", || (admin.stats(PATIENCE).unwrap().running == 1).then_some(()));
-    stop_and_continue(child.0.id(), Duration::from_millis(50));
+    stop_and_continue(child.id(), Duration::from_millis(50));
     let (mut stdout, mut stderr) = (String::new(), String::new());
-    child.0.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
-    child.0.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
-    let status = child.0.wait().unwrap();
+    let process = child.child_mut().expect("not reaped");
+    process.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
+    process.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
+    let status = process.wait().unwrap();
     let _ = std::fs::remove_file(&file);
     assert!(status.success(), "{stderr}");
     let answer: serde_json::Value = serde_json::from_str(&stdout).expect("the answer as JSON");

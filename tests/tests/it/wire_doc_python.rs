@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Instant;
 
-const DOC: &str = include_str!("../../docs/wire.md");
+const DOC: &str = include_str!("../../../docs/wire.md");
 
 /// The Python code blocks of §8, in order, as one program.
 fn section_8_python() -> String {

@@ -29,7 +29,7 @@ use dyfos_tests::Sandbox;
 use iceoryx2::service::static_config::message_type_details::{TypeDetail, TypeVariant};
 use std::collections::BTreeMap;
 
-const DOC: &str = include_str!("../../docs/wire.md");
+const DOC: &str = include_str!("../../../docs/wire.md");
 
 /// One Markdown table of the document.
 #[derive(Debug)]
@@ -891,7 +891,7 @@ fn documented_client_port_settings_loan_every_size_a_request_may_have() {
 /// for the default domain.
 #[test]
 fn the_shared_memory_a_stopped_daemon_leaves_is_documented() {
-    const DAEMON_DOC: &str = include_str!("../../docs/daemon.md");
+    const DAEMON_DOC: &str = include_str!("../../../docs/daemon.md");
     let sandbox = Sandbox::new("wire-doc-shm");
     let mut daemon = sandbox.start_daemon(&[]);
     sandbox.client().stats(std::time::Duration::from_secs(30)).expect("stats");

@@ -13,7 +13,7 @@
 
 use dyfos_client::prelude::*;
 use dyfos_shared::wire::rendezvous::Mode;
-use dyfos_tests::{ChildGuard, PATIENCE, RawClient, Sandbox, signal, wait_for};
+use dyfos_tests::{KillOnDrop, PATIENCE, RawClient, Sandbox, wait_for};
 use std::process::Stdio;
 use std::time::Duration;
 
@@ -57,7 +57,7 @@ fn abandoned(admin: &mut Client) -> u64 {
 /// Starts `dyfos query` on the slow scenario (a `brute` search) and waits until the
 /// daemon searches for it. `dyfos query` uploads the scenario's world itself, under
 /// an id of its own. The file is removed when the returned `TempFile` is dropped.
-fn start_doomed_query(sandbox: &Sandbox, admin: &mut Client) -> (ChildGuard, TempFile) {
+fn start_doomed_query(sandbox: &Sandbox, admin: &mut Client) -> (KillOnDrop, TempFile) {
     let file = TempFile(sandbox.state_dir.with_extension("slow.json"));
     std::fs::write(&file.0, Scenario { world: slow_world(), ..scenario() }.to_json()).unwrap();
     let child = sandbox
@@ -68,7 +68,7 @@ fn start_doomed_query(sandbox: &Sandbox, admin: &mut Client) -> (ChildGuard, Tem
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let child = ChildGuard(child);
+    let child = KillOnDrop::new(child);
     wait_for("the doomed brute query to run", || (admin.stats(PATIENCE).unwrap().running == 1).then_some(()));
     (child, file)
 }
@@ -79,8 +79,7 @@ fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
     let (daemon, mut admin) = start(&sandbox);
     let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
     assert_eq!(abandoned(&mut admin), 0, "a search whose client is there goes on");
-    signal(child.0.id(), "KILL");
-    let _ = child.0.wait();
+    child.kill(); // SIGKILL, and reap
 
     // iceoryx2 sees the killed client gone once its node is cleaned up: by the
     // daemon's housekeeping, or at once when a process of the domain creates a
@@ -166,8 +165,7 @@ fn the_daemon_cleans_up_after_a_killed_client_by_itself() {
     let sandbox = Sandbox::new("abandon-janitor");
     let (daemon, mut admin) = start(&sandbox);
     let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
-    signal(child.0.id(), "KILL");
-    let _ = child.0.wait();
+    child.kill(); // SIGKILL, and reap
     wait_for("the orphaned search to be abandoned", || (abandoned(&mut admin) == 1).then_some(()));
     assert!(daemon.log().contains("removed resources of dead clients"), "{}", daemon.log());
 }
