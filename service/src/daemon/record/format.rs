@@ -387,6 +387,7 @@ pub struct MapChange {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dyfos_shared::params::ModelKind;
     use dyfos_shared::world::{Obstacle, VerticalCylinder};
 
     /// Awkward numbers: no short decimal form, the smallest subnormal, -0.
