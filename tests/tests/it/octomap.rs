@@ -12,15 +12,21 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
+/// The oracle, compiled once per run beside the test executable: a directory this
+/// machine certainly lets us execute from (a target's `tmp` need not be), under a
+/// temporary name renamed into place so no one runs a half-written file.
 fn oracle() -> &'static Path {
     static BUILT: OnceLock<PathBuf> = OnceLock::new();
     BUILT.get_or_init(|| {
-        let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("octomap_cells");
+        let exe = std::env::current_exe().expect("the test executable's path");
+        let dir = exe.parent().expect("the test executable's directory");
+        let out = dir.join("octomap_cells");
+        let partial = dir.join(format!("octomap_cells.{}.partial", std::process::id()));
         let source = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("oracle/octomap_cells.cpp");
         let built = Command::new("c++")
             .arg("-O1")
             .arg("-o")
-            .arg(&out)
+            .arg(&partial)
             .arg(&source)
             .args(["-loctomap", "-loctomath"])
             .output()
@@ -30,14 +36,24 @@ fn oracle() -> &'static Path {
             "cannot build the liboctomap oracle (install liboctomap-dev; scripts/test does): {}",
             String::from_utf8_lossy(&built.stderr)
         );
+        std::fs::rename(&partial, &out).expect("move the oracle into place");
         out
+    })
+}
+
+/// Runs the oracle; a failure to start it names the file and its mode.
+fn run_oracle(cmd: &mut Command) -> std::process::Output {
+    cmd.output().unwrap_or_else(|e| {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(oracle()).map(|m| format!("{:o}", m.permissions().mode()));
+        panic!("cannot run the oracle {} (mode {mode:?}): {e}", oracle().display())
     })
 }
 
 /// What liboctomap reads from `file`: occupied nodes (min index, side), sorted; node
 /// count; resolution.
 fn liboctomap(file: &Path) -> (Vec<[i64; 4]>, u64, f64) {
-    let listed = Command::new(oracle()).arg(file).output().expect("run the oracle");
+    let listed = run_oracle(Command::new(oracle()).arg(file));
     assert!(listed.status.success(), "{}", String::from_utf8_lossy(&listed.stderr));
     let text = String::from_utf8(listed.stdout).unwrap();
     let (cubes, last) = text.trim_end().rsplit_once('\n').unwrap_or(("", text.trim_end()));
@@ -83,12 +99,7 @@ fn maps_liboctomap_writes_pruned_or_not_read_the_same() {
         let mut cells_by_form = Vec::new();
         for form in ["pruned", "unpruned"] {
             let file = dir.join(format!("map-{res}-{seed}-{form}.bt"));
-            let made = Command::new(oracle())
-                .args(["generate"])
-                .arg(&file)
-                .args([res, seed, form])
-                .output()
-                .expect("run the oracle");
+            let made = run_oracle(Command::new(oracle()).args(["generate"]).arg(&file).args([res, seed, form]));
             assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
             let (expected, got) = (liboctomap(&file), ours(&file));
             assert_eq!(got.0, expected.0, "{res} {form}: the occupied nodes differ");
