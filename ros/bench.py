@@ -214,11 +214,23 @@ def node_commands(specs: List[str]) -> Dict[str, Tuple[str, str]]:
     return nodes
 
 
+def spin_until_interrupted(node: Any) -> None:
+    """Spins ``node`` until SIGINT (or ROS shuts down), then destroys it and shuts rclpy down."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
 def serve_echo() -> None:
     """A FindSensorPose server that answers at once (success, all else zero)."""
     import rclpy
     from dyfos_msgs.srv import FindSensorPose
-    from rclpy.executors import ExternalShutdownException
 
     def answer(request: Any, response: Any) -> Any:
         response.success = True
@@ -227,18 +239,12 @@ def serve_echo() -> None:
     rclpy.init()
     node = rclpy.create_node("rosbench_echo")
     node.create_service(FindSensorPose, "~/find_sensor_pose", answer)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    node.destroy_node()
-    rclpy.try_shutdown()
+    spin_until_interrupted(node)
 
 
 def watch(topics: List[str]) -> None:
     """Subscribes to ``topics`` (MarkerArray, as RViz does) until SIGINT."""
     import rclpy
-    from rclpy.executors import ExternalShutdownException
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from visualization_msgs.msg import MarkerArray
 
@@ -247,12 +253,7 @@ def watch(topics: List[str]) -> None:
     node = rclpy.create_node("rosbench_markers")
     for topic in topics:
         node.create_subscription(MarkerArray, topic, lambda _msg: None, qos)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    node.destroy_node()
-    rclpy.try_shutdown()
+    spin_until_interrupted(node)
 
 
 def cpu_model() -> str:

@@ -6,6 +6,8 @@
 //! `dyfos-bench` starts the `dyfosd` built next to it (`dyfos_tests::bin` builds it
 //! if it is missing).
 
+mod common;
+
 use std::process::Command;
 
 #[test]
@@ -13,45 +15,53 @@ fn latency_command_smoke_run() {
     let exe = std::path::PathBuf::from(env!("CARGO_BIN_EXE_dyfos-bench"));
     assert_eq!(dyfos_tests::bin("dyfosd"), exe.with_file_name("dyfosd"), "dyfosd is built next to dyfos-bench");
     let out = std::env::temp_dir().join(format!("dyfos-bench-latency-smoke-{}", std::process::id()));
-    let output = Command::new(&exe)
-        .args(["latency", "--seconds", "0.2", "--clients", "1,2", "--open-clients", "2", "--maps", "2"])
-        .args(["--null-rates", "300", "--dyfos-rates", "30", "--mixed-null-rate", "300", "--mixed-dyfos-clients", "1"])
-        // A second daemon with another polling window, for the before/after table.
-        .arg("--compare-daemon-arg=--set=scheduling.poll_us=50")
-        // Clients with a shorter poll window than the library default.
-        .args(["--client-poll-us", "100"])
-        // The contention runs, short: one hog, 0.2 s idle.
-        .args(["--hogs", "1", "--idle-seconds", "0.2"])
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .expect("dyfos-bench runs");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(output.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&output.stderr));
-    for row in [
-        "| floor | 1 | ",
-        "| null | 1 | ",
-        "| null | 2 | ",
-        "| dyfos | 2 | ",
-        "| null | 2 | 300 | ",
-        "| dyfos | 2 | 30 | ",
-    ] {
-        assert!(stdout.contains(row), "missing `{row}` in\n{stdout}");
-    }
+    let stdout = common::succeeds(
+        Command::new(&exe)
+            .args(["latency", "--seconds", "0.2", "--clients", "1,2", "--open-clients", "2", "--maps", "2"])
+            .args([
+                "--null-rates",
+                "300",
+                "--dyfos-rates",
+                "30",
+                "--mixed-null-rate",
+                "300",
+                "--mixed-dyfos-clients",
+                "1",
+            ])
+            // A second daemon with another polling window, for the before/after table.
+            .arg("--compare-daemon-arg=--set=scheduling.poll_us=50")
+            // Clients with a shorter poll window than the library default.
+            .args(["--client-poll-us", "100"])
+            // The contention runs, short: one hog, 0.2 s idle.
+            .args(["--hogs", "1", "--idle-seconds", "0.2"]),
+        &out,
+    );
+    common::assert_holds(
+        &stdout,
+        &[
+            "| floor | 1 | ",
+            "| null | 1 | ",
+            "| null | 2 | ",
+            "| dyfos | 2 | ",
+            "| null | 2 | 300 | ",
+            "| dyfos | 2 | 30 | ",
+        ],
+    );
     assert!(stdout.contains("in-process `dyfos` query"), "{stdout}");
     assert!(stdout.contains("### Mixed"), "{stdout}");
     assert!(stdout.contains("(left) and dyfosd with `--set=scheduling.poll_us=50` (right)"), "{stdout}");
     // The contention runs, against both daemons.
-    for run in [
-        "| stats open loop, 300/s over 1 client(s), beside dyfos closed loop",
-        "| map open loop, 300/s over 1 client(s), beside dyfos closed loop",
-        "| hog closed loop, 1 client(s), beside dyfos closed loop",
-        "| greedy closed loop, 1 client(s), beside dyfos closed loop",
-        "| null open loop, 300/s over 1 client(s), beside churn closed loop",
-        "| null open loop, 300/s over 1 client(s), beside dyfos closed loop",
-    ] {
-        assert!(stdout.contains(run), "missing `{run}` in\n{stdout}");
-    }
+    common::assert_holds(
+        &stdout,
+        &[
+            "| stats open loop, 300/s over 1 client(s), beside dyfos closed loop",
+            "| map open loop, 300/s over 1 client(s), beside dyfos closed loop",
+            "| hog closed loop, 1 client(s), beside dyfos closed loop",
+            "| greedy closed loop, 1 client(s), beside dyfos closed loop",
+            "| null open loop, 300/s over 1 client(s), beside churn closed loop",
+            "| null open loop, 300/s over 1 client(s), beside dyfos closed loop",
+        ],
+    );
     assert!(stdout.contains("Idle: dyfosd used ") && stdout.contains("; dyfosd with `--set"), "{stdout}");
     assert!(!stdout.contains("Targets"), "no acceptance table: {stdout}");
     assert!(stdout.contains("Daemon shutdown: clean (SIGTERM, exit 0)"), "{stdout}");

@@ -2,23 +2,24 @@
 //! every model, the std plots, planning on two maps with the per-map gaps. No
 //! timing or quality is asserted here; the figures are in `bench/RESULTS.md`.
 
+mod common;
+
 use std::process::Command;
 
 #[test]
 fn learned_command_smoke_run() {
     let model = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/data/learned/model.bin");
     let out = std::env::temp_dir().join(format!("dyfos-bench-learned-smoke-{}", std::process::id()));
-    let output = Command::new(env!("CARGO_BIN_EXE_dyfos-bench"))
-        .args(["learned", "--model", model, "--samples", "2000", "--maps", "2", "--repeats", "1"])
-        .args(["--algos", "dyfos", "--out"])
-        .arg(&out)
-        .output()
-        .expect("dyfos-bench runs");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(output.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&output.stderr));
-    for row in ["| learned | ", "| paper | ", "| map | true-planned E | learned | paper | anisotropic |", "| 1 | "] {
-        assert!(stdout.contains(row), "missing `{row}` in\n{stdout}");
-    }
+    let stdout = common::succeeds(
+        Command::new(env!("CARGO_BIN_EXE_dyfos-bench"))
+            .args(["learned", "--model", model, "--samples", "2000", "--maps", "2", "--repeats", "1"])
+            .args(["--algos", "dyfos"]),
+        &out,
+    );
+    common::assert_holds(
+        &stdout,
+        &["| learned | ", "| paper | ", "| map | true-planned E | learned | paper | anisotropic |", "| 1 | "],
+    );
     for file in ["learned.md", "learned-std-u.svg", "learned-std-v.svg"] {
         let text = std::fs::read_to_string(out.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
         assert!(text.len() > 200, "{file} is nearly empty");

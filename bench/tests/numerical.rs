@@ -3,6 +3,8 @@
 //! `dyfos-bench numerical` so the command cannot rot. No timing is asserted; speed is
 //! in `bench/RESULTS.md`.
 
+mod common;
+
 use dyfos_bench::evaluation::{Contender, evaluate};
 use dyfos_bench::numerical::{NumericalConfig, numerical_maps};
 use dyfos_shared::answer::Algorithm;
@@ -57,18 +59,23 @@ fn dyfos_lands_near_brute_on_the_median_map_anisotropic_model() {
 #[test]
 fn numerical_command_smoke_run() {
     let out = std::env::temp_dir().join(format!("dyfos-bench-smoke-{}", std::process::id()));
-    let output = Command::new(env!("CARGO_BIN_EXE_dyfos-bench"))
-        .args(["numerical", "--maps", "2", "--repeats", "1", "--algos", "dyfos,brute,random,center", "--threads", "2"])
-        .args(["--obstacles", "25,100", "--scaling-maps", "1", "--voxel-resolution", "0.5"])
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .expect("dyfos-bench runs");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(output.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&output.stderr));
-    for table in ["| dyfos | ", "| brute | 2 |", "(median)", "| 100 | 40 × 40 m | voxels 0.5 m |"] {
-        assert!(stdout.contains(table), "missing `{table}` in\n{stdout}");
-    }
+    let stdout = common::succeeds(
+        Command::new(env!("CARGO_BIN_EXE_dyfos-bench"))
+            .args([
+                "numerical",
+                "--maps",
+                "2",
+                "--repeats",
+                "1",
+                "--algos",
+                "dyfos,brute,random,center",
+                "--threads",
+                "2",
+            ])
+            .args(["--obstacles", "25,100", "--scaling-maps", "1", "--voxel-resolution", "0.5"]),
+        &out,
+    );
+    common::assert_holds(&stdout, &["| dyfos | ", "| brute | 2 |", "(median)", "| 100 | 40 × 40 m | voxels 0.5 m |"]);
     for file in ["numerical-paper-cost.svg", "numerical-paper.json", "numerical-paper.md", "scaling.svg", "scaling.md"]
     {
         let text = std::fs::read_to_string(out.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));

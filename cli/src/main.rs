@@ -113,11 +113,4 @@ fn main() -> ExitCode {
     }
 }
 
-#[cfg(test)]
-mod cli_tests {
-    /// Every number a dyfos command prints can be pasted back, `-7.08e-06` included.
-    #[test]
-    fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
-        dyfos_process::cli::assert_numeric_flags_take_signs(&<super::Cli as clap::CommandFactory>::command());
-    }
-}
+dyfos_process::numeric_flags_test!(super::Cli);

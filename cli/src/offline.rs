@@ -15,21 +15,29 @@ use std::path::{Path, PathBuf};
 pub struct SolveArgs {
     /// Scenario file (SPEC §11 JSON).
     pub scenario: PathBuf,
-    /// Search algorithm.
-    #[arg(long, default_value = "dyfos", value_parser = parse_algorithm)]
-    pub algo: Algorithm,
-    /// Seed of the random stream: the same seed gives the same answer.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Most candidates to evaluate (default: the algorithm's own limits).
-    #[arg(long)]
-    pub budget: Option<u64>,
+    #[command(flatten)]
+    pub search: SearchArgs,
     /// Worker threads for `brute` (default: all cores; the answer does not change).
     #[arg(long)]
     pub threads: Option<usize>,
     /// Model file of the learned SDSMM (written by `dyfos train`); implies `"model": "learned"`.
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
+}
+
+/// How to search: the same flags, and for the same values the same answer, in
+/// `dyfos solve` (in this process) and `dyfos query` (through `dyfosd`).
+#[derive(Debug, clap::Args)]
+pub struct SearchArgs {
+    /// Search algorithm.
+    #[arg(long, default_value = "dyfos", value_parser = parse_algorithm)]
+    pub algo: Algorithm,
+    /// Seed of the random stream: the same seed gives the same answer, from `dyfos solve` or `dyfos query`.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Most candidates to evaluate (default: the algorithm's own limits).
+    #[arg(long)]
+    pub budget: Option<u64>,
 }
 
 /// Flags of `dyfos eval`.
@@ -82,13 +90,14 @@ fn model_of(scenario: &mut Scenario, path: &Path, model_file: Option<&Path>) -> 
 pub fn solve(args: &SolveArgs) -> Result<(), Failure> {
     let mut scenario = load_scenario(&args.scenario)?;
     let model = model_of(&mut scenario, &args.scenario, args.model.as_deref())?;
-    let mut control = SearchControl::seeded(args.seed);
-    control.budget = args.budget;
+    let mut control = SearchControl::seeded(args.search.seed);
+    control.budget = args.search.budget;
     if let Some(t) = args.threads {
         control.threads = t.max(1);
     }
-    let answer = solve_scenario(&scenario.world, &scenario.belief, &scenario.params, &model, args.algo, &control)
-        .map_err(|e: SearchError| Failure::infeasible(e))?;
+    let answer =
+        solve_scenario(&scenario.world, &scenario.belief, &scenario.params, &model, args.search.algo, &control)
+            .map_err(|e: SearchError| Failure::infeasible(e))?;
     crate::print_json(&answer.to_json());
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! commands, asked of a running `dyfosd` through the client library.
 
 use crate::Failure;
-use crate::offline::{load_scenario, parse_algorithm};
+use crate::offline::{SearchArgs, load_scenario};
 use anyhow::anyhow;
 use dyfos_client::prelude::*;
 use dyfos_client::{MapRequestError, RendezvousError};
@@ -42,15 +42,8 @@ impl DaemonArgs {
 pub struct QueryArgs {
     /// Scenario file (SPEC §11 JSON): its map is uploaded, its rover queried.
     pub scenario: PathBuf,
-    /// Search algorithm.
-    #[arg(long, default_value = "dyfos", value_parser = parse_algorithm)]
-    pub algo: Algorithm,
-    /// Seed of the random stream: the same seed gives the same answer as `dyfos solve`.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Most candidates to evaluate (default: the algorithm's own limits).
-    #[arg(long)]
-    pub budget: Option<u64>,
+    #[command(flatten)]
+    pub search: SearchArgs,
     /// Milliseconds the daemon may search before answering with its best so far.
     #[arg(long)]
     pub deadline_ms: Option<u64>,
@@ -199,9 +192,9 @@ pub fn query(args: &QueryArgs) -> Result<(), Failure> {
         client.upload_scenario_map(&scenario.world, args.map, args.replace, timeout).map_err(map_failure)?;
     let request = RendezvousRequest {
         expected_version: Some(version),
-        algorithm: args.algo,
-        seed: args.seed,
-        budget: args.budget,
+        algorithm: args.search.algo,
+        seed: args.search.seed,
+        budget: args.search.budget,
         deadline: args.deadline_ms.map(Duration::from_millis),
         params: scenario.params,
         ..RendezvousRequest::new(map, scenario.belief)

@@ -75,6 +75,18 @@ fn ipc(e: impl std::error::Error + Send + Sync + 'static) -> CallError {
     CallError::Ipc(IpcFailure::new(e))
 }
 
+/// `NoDaemon` if a request sent on `service` reached no server (`connections` 0).
+fn unserved(connections: usize, service: &str, names: &ServiceNames, config: &ClientConfig) -> Result<(), CallError> {
+    if connections == 0 {
+        return Err(CallError::NoDaemon {
+            service: service.to_string(),
+            prefix: names.prefix.clone(),
+            domain: config.domain.clone(),
+        });
+    }
+    Ok(())
+}
+
 fn open_ipc(e: impl std::error::Error + Send + Sync + 'static) -> ClientOpenError {
     ClientOpenError::Ipc(IpcFailure::new(e))
 }
@@ -379,13 +391,7 @@ impl Client {
             let mut loan = conn.rendezvous.loan_slice_uninit(records.len()).map_err(ipc)?;
             *loan.user_header_mut() = header;
             let pending = loan.write_from_slice(&records).send().map_err(ipc)?;
-            if pending.number_of_server_connections() == 0 {
-                return Err(CallError::NoDaemon {
-                    service: names.rendezvous.clone(),
-                    prefix: names.prefix.clone(),
-                    domain: config.domain.clone(),
-                });
-            }
+            unserved(pending.number_of_server_connections(), &names.rendezvous, names, config)?;
             conn.await_reply(
                 config.poll,
                 timeout,
@@ -436,13 +442,7 @@ impl Client {
             let mut loan = conn.map.loan_slice_uninit(records.len()).map_err(ipc)?;
             *loan.user_header_mut() = header;
             let pending = loan.write_from_slice(&records).send().map_err(ipc)?;
-            if pending.number_of_server_connections() == 0 {
-                return Err(CallError::NoDaemon {
-                    service: names.map.clone(),
-                    prefix: names.prefix.clone(),
-                    domain: config.domain.clone(),
-                });
-            }
+            unserved(pending.number_of_server_connections(), &names.map, names, config)?;
             conn.await_reply(
                 config.poll,
                 timeout,
@@ -655,13 +655,7 @@ impl Client {
         let reply = self.with_connection(timeout, |conn, id, config, names, interrupt| {
             let request = StatsRequest { request_id: id, reply_to: conn.reply_to };
             let pending = conn.stats.send_copy(request).map_err(ipc)?;
-            if pending.number_of_server_connections() == 0 {
-                return Err(CallError::NoDaemon {
-                    service: names.stats.clone(),
-                    prefix: names.prefix.clone(),
-                    domain: config.domain.clone(),
-                });
-            }
+            unserved(pending.number_of_server_connections(), &names.stats, names, config)?;
             conn.await_reply(
                 config.poll,
                 timeout,

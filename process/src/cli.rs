@@ -36,3 +36,19 @@ pub fn assert_numeric_flags_take_signs(cmd: &clap::Command) {
     let refusing = numeric_flags_refusing_signs(cmd);
     assert!(refusing.is_empty(), "set allow_hyphen_values on {refusing:?}");
 }
+
+/// The test every dyfos binary runs on its command line `$cli` (its `clap::Parser`):
+/// every number a dyfos command prints can be pasted back, `-7.08e-06` included.
+/// Expands to a `#[cfg(test)]` module `cli_tests`.
+#[macro_export]
+macro_rules! numeric_flags_test {
+    ($cli:ty) => {
+        #[cfg(test)]
+        mod cli_tests {
+            #[test]
+            fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
+                $crate::cli::assert_numeric_flags_take_signs(&<$cli as clap::CommandFactory>::command());
+            }
+        }
+    };
+}

@@ -54,16 +54,16 @@ const MAX_RECORD_BYTES: usize = 64 << 20;
 /// A journal longer than this and than its base is folded into a new base.
 const COMPACT_AFTER_BYTES: u64 = 16 << 20;
 
-/// A map as written to a base file.
+/// A map as written to a base file; `V` is how its format writes the voxels.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-struct StoredMap {
+struct StoredMap<V = StoredVoxels> {
     format: u32,
     id: MapId,
     version: u64,
     bounds: Bounds,
     sun: Sun,
     obstacles: Vec<(u32, Obstacle)>,
-    voxels: Option<StoredVoxels>,
+    voxels: Option<V>,
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -74,16 +74,7 @@ struct StoredVoxels {
 }
 
 /// Format 1: the voxels as a cell list.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-struct StoredMapV1 {
-    format: u32,
-    id: MapId,
-    version: u64,
-    bounds: Bounds,
-    sun: Sun,
-    obstacles: Vec<(u32, Obstacle)>,
-    voxels: Option<StoredVoxelsV1>,
-}
+type StoredMapV1 = StoredMap<StoredVoxelsV1>;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 struct StoredVoxelsV1 {

@@ -131,6 +131,22 @@ impl Sandbox {
         Client::connect(&self.client_config()).expect("connect to the test daemon")
     }
 
+    /// An iceoryx2 node (plain `ipc::Service`, signals left to the test) in this
+    /// sandbox's domain, and the names of its daemon's services: what a test needs to
+    /// open those services itself.
+    pub fn ipc_node(
+        &self,
+    ) -> (iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>, dyfos_shared::wire::ServiceNames) {
+        use iceoryx2::prelude::*;
+        let config = dyfos_shared::wire::services::iceoryx_config(Some(&self.domain)).expect("domain");
+        let node = NodeBuilder::new()
+            .config(&config)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .expect("node");
+        (node, dyfos_shared::wire::ServiceNames::new(&self.prefix).expect("prefix"))
+    }
+
     /// The flags that point a `dyfos` command at this sandbox's daemon.
     pub fn dyfos_flags(&self) -> Vec<String> {
         vec!["--prefix".into(), self.prefix.clone(), "--domain".into(), self.domain.clone()]
@@ -346,6 +362,66 @@ pub fn without_micros(mut json: serde_json::Value) -> serde_json::Value {
     json
 }
 
+/// Creates map `id` empty (version 0) in the shape the service tests use: a 20 m
+/// square about the origin, the sun at elevation 0.7 and azimuth 2.1 rad. Returns
+/// its bounds.
+pub fn create_test_map(client: &mut Client, id: u64) -> dyfos_shared::world::Bounds {
+    let bounds = dyfos_shared::world::Bounds::new([-10.0, -10.0, 10.0, 10.0]).expect("bounds");
+    let sun = dyfos_shared::world::Sun::new(0.7, 2.1).expect("sun");
+    client.create_map(id, bounds, sun, PATIENCE).expect("create the test map");
+    bounds
+}
+
+/// A daemon in a sandbox of its own, a client and a raw client of it: where the
+/// tests of bad and hostile requests start. Fields drop in order: the clients, then
+/// the daemon, then the sandbox's files.
+pub struct RawFixture {
+    /// Sends any header and records.
+    pub raw: RawClient,
+    /// The client library, to set up and check maps.
+    pub client: Client,
+    /// The daemon, started with no flags.
+    pub daemon: DaemonProcess,
+    /// Its prefix, domain and state directory.
+    pub sandbox: Sandbox,
+}
+
+impl RawFixture {
+    /// Starts the daemon of test `name` and connects both clients.
+    pub fn new(name: &str) -> RawFixture {
+        let sandbox = Sandbox::new(name);
+        let daemon = sandbox.start_daemon(&[]);
+        let client = sandbox.client();
+        let raw = RawClient::open(&sandbox);
+        RawFixture { raw, client, daemon, sandbox }
+    }
+}
+
+/// Every float of a wire parameter block, in field order (`t_vs` as its three):
+/// what hostile and random requests set one at a time.
+pub fn param_floats_mut(p: &mut dyfos_shared::wire::rendezvous::WireParams) -> [&mut f64; 17] {
+    let [tx, ty, tz] = &mut p.t_vs;
+    [
+        &mut p.rover_radius,
+        &mut p.marker_size,
+        &mut p.marker_height,
+        &mut p.viewer_radius,
+        &mut p.safety_margin,
+        &mut p.z_min,
+        &mut p.z_max,
+        &mut p.camera_pitch,
+        tx,
+        ty,
+        tz,
+        &mut p.f_h,
+        &mut p.f_v,
+        &mut p.rho_min,
+        &mut p.rho_max,
+        &mut p.kappa,
+        &mut p.lambda,
+    ]
+}
+
 /// A client that sends raw wire messages, as a buggy or hostile peer could: any
 /// header, any records. Uses iceoryx2's plain `ipc::Service` (the daemon uses the
 /// thread-safe variant; both share memory). Replies are polled.
@@ -385,13 +461,7 @@ impl RawClient {
     pub fn open(sandbox: &Sandbox) -> RawClient {
         use dyfos_shared::wire::services;
         use iceoryx2::prelude::*;
-        let config = services::iceoryx_config(Some(&sandbox.domain)).expect("domain");
-        let node = NodeBuilder::new()
-            .config(&config)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .expect("node");
-        let names = dyfos_shared::wire::ServiceNames::new(&sandbox.prefix).expect("prefix");
+        let (node, names) = sandbox.ipc_node();
         let services = services::Services::new(&node, &names);
         let rendezvous = services
             .rendezvous()

@@ -176,6 +176,30 @@ impl<'a> MissionFiles<'a> {
         self.logs.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
     }
 
+    /// Runs `dyfos demo` on this mission file, unpaced, with the arms `dyfos` and
+    /// `center`, writing to `out`, with `extra` flags. Fails the test,
+    /// with what it printed, unless it succeeds; returns its standard output.
+    pub fn demo(&self, out: &Path, extra: &[&str]) -> String {
+        let output = Command::new(bin("dyfos"))
+            .args(["demo", "--time-scale", "0", "--algos", "dyfos,center"])
+            .args(extra)
+            .arg("--mission")
+            .arg(&self.mission)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .expect("run dyfos demo");
+        let stdout = String::from_utf8_lossy(&output.stdout).to_string();
+        assert!(output.status.success(), "dyfos demo {extra:?}: {stdout}\n{}", String::from_utf8_lossy(&output.stderr));
+        stdout
+    }
+
+    /// Where the rover and the viewer write their MCAP files (`--mcap`): beside the
+    /// mission file, removed with it.
+    pub fn mcap_files(&self) -> (PathBuf, PathBuf) {
+        (self.dir.join("rover.mcap"), self.dir.join("viewer.mcap"))
+    }
+
     /// A recorder for mission `name`: open it before starting the rover.
     pub fn recorder(&self, name: &str) -> Recorder {
         Recorder::open(&TopicsConfig {

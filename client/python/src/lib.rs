@@ -539,12 +539,15 @@ impl PyClient {
         maps.iter().map(|m| json_to_py(py, &m.to_json())).collect()
     }
 
-    /// A rendezvous query; see `dyfos.Client.rendezvous`.
-    #[pyo3(signature = (map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas, timeout))]
+    /// A rendezvous query: with `check` false the answer (see
+    /// `dyfos.Client.rendezvous`), with `check` true the same request in check mode,
+    /// validated by the daemon and not searched: the map version it would search.
+    #[pyo3(signature = (check, map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas, timeout))]
     #[allow(clippy::too_many_arguments)]
-    fn rendezvous(
+    fn rendezvous<'py>(
         &self,
-        py: Python<'_>,
+        py: Python<'py>,
+        check: bool,
         map_id: u64,
         mean: &Bound<'_, PyAny>,
         cov: &Bound<'_, PyAny>,
@@ -556,38 +559,18 @@ impl PyClient {
         expected_version: Option<u64>,
         deltas: Option<&str>,
         timeout: Option<f64>,
-    ) -> PyResult<PyAnswer> {
+    ) -> PyResult<Bound<'py, PyAny>> {
         let (mean, cov) = belief_numbers(mean, cov).map_err(|e| to_pyerr(py, e))?;
         let args =
             RequestArgs { map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas };
         let request = args.request().map_err(|e| to_pyerr(py, e))?;
-        self.call(py, timeout, |c, t| c.rendezvous(&request, t)).map(PyAnswer)
-    }
-
-    /// The same request in check mode: validated by the daemon, not searched;
-    /// returns the map version it would search.
-    #[pyo3(signature = (map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas, timeout))]
-    #[allow(clippy::too_many_arguments)]
-    fn check(
-        &self,
-        py: Python<'_>,
-        map_id: u64,
-        mean: &Bound<'_, PyAny>,
-        cov: &Bound<'_, PyAny>,
-        algorithm: &str,
-        seed: u64,
-        params: Option<&str>,
-        budget: Option<u64>,
-        deadline: Option<f64>,
-        expected_version: Option<u64>,
-        deltas: Option<&str>,
-        timeout: Option<f64>,
-    ) -> PyResult<u64> {
-        let (mean, cov) = belief_numbers(mean, cov).map_err(|e| to_pyerr(py, e))?;
-        let args =
-            RequestArgs { map_id, mean, cov, algorithm, seed, params, budget, deadline, expected_version, deltas };
-        let request = args.request().map_err(|e| to_pyerr(py, e))?;
-        self.call(py, timeout, |c, t| c.check(&request, t)).map(|c| c.map_version)
+        if check {
+            let checked = self.call(py, timeout, |c, t| c.check(&request, t))?;
+            Ok(checked.map_version.into_pyobject(py)?.into_any())
+        } else {
+            let answer = self.call(py, timeout, |c, t| c.rendezvous(&request, t))?;
+            Ok(Bound::new(py, PyAnswer(answer))?.into_any())
+        }
     }
 
     /// Benchmark baseline: sends the same `dyfos` query (`check` true: in check mode)

@@ -16,7 +16,7 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Dict, Iterator, List, Optional
+from typing import Any, Callable, Dict, Iterator, List, Optional
 
 import pytest
 
@@ -126,19 +126,25 @@ def daemon() -> Iterator[Daemon]:
     d.stop()
 
 
-@pytest.fixture
-def own_daemon() -> Iterator[Any]:
-    """Starts daemons for one test (``own_daemon(*flags)``); stops them after it."""
-    started: List[Daemon] = []
+def daemons_started_by(make: Callable[..., Any]) -> Iterator[Callable[..., Any]]:
+    """The body of a fixture that starts daemons for one test: yields ``start(*flags)``,
+    which makes one with ``make(*flags)``, and stops every one it made after the test."""
+    started: List[Any] = []
 
-    def start(*extra: str) -> Daemon:
-        d = Daemon("own", *extra)
+    def start(*extra: str) -> Any:
+        d = make(*extra)
         started.append(d)
         return d
 
     yield start
     for d in started:
         d.stop()
+
+
+@pytest.fixture
+def own_daemon() -> Iterator[Callable[..., Daemon]]:
+    """Starts daemons for one test (``own_daemon(*flags)``); stops them after it."""
+    yield from daemons_started_by(lambda *extra: Daemon("own", *extra))
 
 
 @pytest.fixture

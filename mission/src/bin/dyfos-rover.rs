@@ -4,15 +4,12 @@
 //! Exit codes: 0 at the goal; 2 for bad flags or a bad mission file; 1 otherwise
 //! (no viewer, stopped by a signal, iceoryx2 failure).
 
-use anyhow::Context;
 use clap::Parser;
-use dyfos_mission::eval::McapProfile;
+use dyfos_mission::cli;
 use dyfos_mission::mission::Mission;
 use dyfos_mission::rover::{RoverConfig, run_rover};
-use dyfos_process::shutdown;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Duration;
 
 /// A simulated rover with no exteroception: dead-reckons between waypoints and asks
 /// a viewer to measure it at each one.
@@ -20,7 +17,7 @@ use std::time::Duration;
 #[command(name = "dyfos-rover", version, about, long_about = None)]
 struct Cli {
     #[command(flatten)]
-    topics: dyfos_mission::cli::TopicArgs,
+    topics: cli::TopicArgs,
     /// Mission file (scenario + waypoints, see `dyfos_mission::mission`); default: the built-in mission.
     #[arg(long)]
     mission: Option<PathBuf>,
@@ -48,70 +45,30 @@ struct Cli {
     /// Drive without a viewer (no rendezvous, no measurements): the baseline.
     #[arg(long)]
     dead_reckoning: bool,
-    /// Write every event as a JSON line to this file.
-    #[arg(long)]
-    events: Option<PathBuf>,
-    /// Write the mission as an MCAP file here at exit (its true and estimated poses, rendezvous, measurements and APE), for Foxglove.
-    #[arg(long)]
-    mcap: Option<PathBuf>,
-    /// Encoding of the --mcap file: `foxglove` (JSON with Foxglove's schemas) or `ros2`
-    /// (CDR with ROS 2 message definitions, as rosbag2 writes: `ros2 bag play`, RViz).
-    #[arg(long, value_enum, default_value_t = McapProfile::Foxglove)]
-    mcap_profile: McapProfile,
-}
-
-fn seconds(name: &str, v: f64) -> anyhow::Result<Duration> {
-    Duration::try_from_secs_f64(v).map_err(|_| anyhow::anyhow!("--{name} = {v} must be a number of seconds ≥ 0"))
+    #[command(flatten)]
+    output: cli::OutputArgs,
 }
 
 fn config(cli: &Cli) -> anyhow::Result<RoverConfig> {
     let mission = Mission::load(cli.mission.as_deref())?;
-    if !(cli.time_scale.is_finite() && cli.time_scale >= 0.0) {
-        anyhow::bail!("--time-scale = {} must be ≥ 0 (0: as fast as possible)", cli.time_scale);
-    }
-    let topics = cli.topics.topics();
+    let time_scale = cli::time_scale(cli.time_scale)?;
     Ok(RoverConfig {
-        time_scale: (cli.time_scale > 0.0).then_some(cli.time_scale),
-        measurement_timeout: seconds("measurement-timeout", cli.measurement_timeout)?,
-        viewer_timeout: seconds("viewer-timeout", cli.viewer_timeout)?,
-        presence_timeout: seconds("presence-timeout", cli.presence_timeout)?,
-        linger: seconds("linger", cli.linger)?,
+        time_scale,
+        measurement_timeout: cli::seconds("measurement-timeout", cli.measurement_timeout)?,
+        viewer_timeout: cli::seconds("viewer-timeout", cli.viewer_timeout)?,
+        presence_timeout: cli::seconds("presence-timeout", cli.presence_timeout)?,
+        linger: cli::seconds("linger", cli.linger)?,
         dead_reckoning: cli.dead_reckoning,
-        events: cli.events.clone(),
-        mcap: cli.mcap.clone(),
-        mcap_profile: cli.mcap_profile,
-        ..RoverConfig::new(topics, mission, cli.seed)
+        events: cli.output.events.clone(),
+        mcap: cli.output.mcap.clone(),
+        mcap_profile: cli.output.mcap_profile,
+        ..RoverConfig::new(cli.topics.topics(), mission, cli.seed)
     })
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    dyfos_process::logging::init();
-    let config = match config(&cli) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("dyfos-rover: {e:#}");
-            return ExitCode::from(2);
-        }
-    };
-    shutdown::install();
-    let code = match run_rover(&config, &shutdown::requested).context("mission failed") {
-        Ok(_) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("dyfos-rover: {e:#}");
-            ExitCode::from(1)
-        }
-    };
-    // Say how many lines the rate limit left out in the last window.
-    dyfos_process::logging::flush();
-    code
+    cli::main("dyfos-rover", "mission failed", || config(&cli), |config, stop| run_rover(config, &stop))
 }
 
-#[cfg(test)]
-mod cli_tests {
-    /// Every number a dyfos command prints can be pasted back, `-7.08e-06` included.
-    #[test]
-    fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
-        dyfos_process::cli::assert_numeric_flags_take_signs(&<super::Cli as clap::CommandFactory>::command());
-    }
-}
+dyfos_process::numeric_flags_test!(super::Cli);

@@ -8,17 +8,15 @@
 use anyhow::Context;
 use clap::Parser;
 use dyfos_client::ClientConfig;
-use dyfos_mission::eval::McapProfile;
+use dyfos_mission::cli;
 use dyfos_mission::mission::Mission;
 use dyfos_mission::viewer::{ViewerConfig, run_viewer};
-use dyfos_process::shutdown;
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::params::ModelKind;
 use dyfos_shared::sdsmm::Learned;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
-use std::time::Duration;
 
 /// A simulated viewer: finds the optimal sensor pose with dyfosd, flies there and
 /// measures the rover.
@@ -26,7 +24,7 @@ use std::time::Duration;
 #[command(name = "dyfos-viewer", version, about, long_about = None)]
 struct Cli {
     #[command(flatten)]
-    topics: dyfos_mission::cli::TopicArgs,
+    topics: cli::TopicArgs,
     /// Mission file (scenario + waypoints, see `dyfos_mission::mission`); default: the built-in mission.
     #[arg(long)]
     mission: Option<PathBuf>,
@@ -63,16 +61,8 @@ struct Cli {
     /// Longest wait for the daemon at start, wall seconds.
     #[arg(allow_hyphen_values = true, long, default_value_t = 10.0)]
     connect_timeout: f64,
-    /// Write every event as a JSON line to this file.
-    #[arg(long)]
-    events: Option<PathBuf>,
-    /// Write the mission as an MCAP file here at exit (the rendezvous beliefs, the daemon's answers, its measurements and poses), for Foxglove.
-    #[arg(long)]
-    mcap: Option<PathBuf>,
-    /// Encoding of the --mcap file: `foxglove` (JSON with Foxglove's schemas) or `ros2`
-    /// (CDR with ROS 2 message definitions, as rosbag2 writes: `ros2 bag play`, RViz).
-    #[arg(long, value_enum, default_value_t = McapProfile::Foxglove)]
-    mcap_profile: McapProfile,
+    #[command(flatten)]
+    output: cli::OutputArgs,
     /// Model file of the learned SDSMM (from `dyfos train`), for missions with
     /// `"model": "learned"`; give dyfosd the same file.
     #[arg(long)]
@@ -86,20 +76,13 @@ fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
     })
 }
 
-fn seconds(name: &str, v: f64) -> anyhow::Result<Duration> {
-    Duration::try_from_secs_f64(v).map_err(|_| anyhow::anyhow!("--{name} = {v} must be a number of seconds ≥ 0"))
-}
-
 fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
     let mission = Mission::load(cli.mission.as_deref())?;
-    if !(cli.time_scale.is_finite() && cli.time_scale >= 0.0) {
-        anyhow::bail!("--time-scale = {} must be ≥ 0 (0: as fast as possible)", cli.time_scale);
-    }
-    let topics = cli.topics.topics();
+    let time_scale = cli::time_scale(cli.time_scale)?;
     let client = ClientConfig {
         prefix: cli.topics.prefix.clone(),
         domain: cli.topics.domain.clone(),
-        connect_timeout: seconds("connect-timeout", cli.connect_timeout)?,
+        connect_timeout: cli::seconds("connect-timeout", cli.connect_timeout)?,
         ..ClientConfig::default()
     };
     let learned = match &cli.model {
@@ -116,48 +99,23 @@ fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
     Ok(ViewerConfig {
         learned,
         map_id: cli.map_id,
-        time_scale: (cli.time_scale > 0.0).then_some(cli.time_scale),
-        query_timeout: seconds("query-timeout", cli.query_timeout)?,
-        query_deadline: Some(seconds("deadline", cli.deadline)?).filter(|d| !d.is_zero()),
-        observe_timeout: seconds("observe-timeout", cli.observe_timeout)?,
-        idle_timeout: seconds("idle-timeout", cli.idle_timeout)?,
-        presence_timeout: seconds("presence-timeout", cli.presence_timeout)?,
-        rover_timeout: seconds("rover-timeout", cli.rover_timeout)?,
-        events: cli.events.clone(),
-        mcap: cli.mcap.clone(),
-        mcap_profile: cli.mcap_profile,
-        ..ViewerConfig::new(client, topics, mission, cli.algo, cli.seed)
+        time_scale,
+        query_timeout: cli::seconds("query-timeout", cli.query_timeout)?,
+        query_deadline: Some(cli::seconds("deadline", cli.deadline)?).filter(|d| !d.is_zero()),
+        observe_timeout: cli::seconds("observe-timeout", cli.observe_timeout)?,
+        idle_timeout: cli::seconds("idle-timeout", cli.idle_timeout)?,
+        presence_timeout: cli::seconds("presence-timeout", cli.presence_timeout)?,
+        rover_timeout: cli::seconds("rover-timeout", cli.rover_timeout)?,
+        events: cli.output.events.clone(),
+        mcap: cli.output.mcap.clone(),
+        mcap_profile: cli.output.mcap_profile,
+        ..ViewerConfig::new(client, cli.topics.topics(), mission, cli.algo, cli.seed)
     })
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    dyfos_process::logging::init();
-    let config = match config(&cli) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("dyfos-viewer: {e:#}");
-            return ExitCode::from(2);
-        }
-    };
-    shutdown::install();
-    let code = match run_viewer(&config, &shutdown::requested).context("viewer failed") {
-        Ok(_) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("dyfos-viewer: {e:#}");
-            ExitCode::from(1)
-        }
-    };
-    // Say how many lines the rate limit left out in the last window.
-    dyfos_process::logging::flush();
-    code
+    cli::main("dyfos-viewer", "viewer failed", || config(&cli), |config, stop| run_viewer(config, &stop))
 }
 
-#[cfg(test)]
-mod cli_tests {
-    /// Every number a dyfos command prints can be pasted back, `-7.08e-06` included.
-    #[test]
-    fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
-        dyfos_process::cli::assert_numeric_flags_take_signs(&<super::Cli as clap::CommandFactory>::command());
-    }
-}
+dyfos_process::numeric_flags_test!(super::Cli);

@@ -231,23 +231,23 @@ def ros_value(v: Any) -> str:
     return str(v)
 
 
-@pytest.fixture
-def ros() -> Iterator[Ros]:
+def _ros_on_a_domain_of_its_own() -> Iterator[Ros]:
     domain = DomainId()
     r = Ros(domain.id)
     yield r
     r.close()
     domain.release()
+
+
+@pytest.fixture
+def ros() -> Iterator[Ros]:
+    yield from _ros_on_a_domain_of_its_own()
 
 
 @pytest.fixture
 def other_ros() -> Iterator[Ros]:
     """A second domain, for tests of two nodes that must not see each other."""
-    domain = DomainId()
-    r = Ros(domain.id)
-    yield r
-    r.close()
-    domain.release()
+    yield from _ros_on_a_domain_of_its_own()
 
 
 @pytest.fixture
@@ -259,16 +259,7 @@ def daemon() -> Iterator[Any]:
 
 @pytest.fixture
 def start_daemon() -> Iterator[Callable[..., Any]]:
-    started: List[Any] = []
-
-    def start(*extra: str) -> Any:
-        d = Daemon("ros", *extra)
-        started.append(d)
-        return d
-
-    yield start
-    for d in started:
-        d.stop()
+    yield from pyconftest.daemons_started_by(lambda *extra: Daemon("ros", *extra))
 
 
 @pytest.fixture

@@ -160,14 +160,11 @@ fn main() -> ExitCode {
     }
 }
 
+dyfos_process::numeric_flags_test!(super::Cli);
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn every_numeric_flag_takes_negative_numbers_in_any_notation() {
-        dyfos_process::cli::assert_numeric_flags_take_signs(&Cli::command());
-    }
 
     fn cli(args: &[&str]) -> Cli {
         Cli::try_parse_from(std::iter::once("dyfosd").chain(args.iter().copied())).unwrap()

@@ -7,7 +7,7 @@ use dyfos_shared::wire::Rejection;
 use dyfos_shared::wire::map::{MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, encode_deltas, tag};
 use dyfos_shared::wire::rendezvous::{Mode, RendezvousRequestHeader, WireParams};
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
-use dyfos_tests::{PATIENCE, RawClient, Sandbox};
+use dyfos_tests::{PATIENCE, RawFixture, Sandbox, create_test_map};
 
 fn pole(x: f64) -> Obstacle {
     Obstacle::Cylinder(VerticalCylinder { center: na::Point2::new(x, 1.0), radius: 0.5, height: 10.0 })
@@ -19,24 +19,17 @@ fn rejection(h: &MapReplyHeader) -> Rejection {
 
 /// A daemon with map 1 (two obstacles, version 2), a client, a raw client, and
 /// the map as it is before any bad request.
-/// Fields drop in order: the clients, then the daemon, then the sandbox's files.
 struct Fixture {
-    raw: RawClient,
-    client: Client,
-    _daemon: dyfos_tests::DaemonProcess,
-    _sandbox: Sandbox,
+    io: RawFixture,
     bounds: Bounds,
     before: World,
 }
 
 impl Fixture {
     fn new(name: &str) -> Fixture {
-        let sandbox = Sandbox::new(name);
-        let daemon = sandbox.start_daemon(&[]);
-        let mut client = sandbox.client();
-        let raw = RawClient::open(&sandbox);
-        let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
-        client.create_map(1, bounds, Sun::new(0.7, 2.1).unwrap(), PATIENCE).unwrap();
+        let mut io = RawFixture::new(name);
+        let client = &mut io.client;
+        let bounds = create_test_map(client, 1);
         let crate_ =
             Obstacle::Box(AxisBox { min: na::Point3::new(4.0, 4.0, 0.0), max: na::Point3::new(5.0, 6.0, 3.0) });
         let deltas = [
@@ -45,17 +38,17 @@ impl Fixture {
         ];
         assert_eq!(client.apply(1, Some(0), &deltas, PATIENCE).unwrap(), 2);
         let before = client.snapshot(1, PATIENCE).unwrap();
-        Fixture { raw, client, _daemon: daemon, _sandbox: sandbox, bounds, before }
+        Fixture { io, bounds, before }
     }
 
     /// Fails, naming the case, if the map changed.
     fn assert_unchanged(&mut self, what: &str) {
-        assert_eq!(self.client.snapshot(1, PATIENCE).unwrap(), self.before, "{what} changed the map");
+        assert_eq!(self.io.client.snapshot(1, PATIENCE).unwrap(), self.before, "{what} changed the map");
     }
 
     /// How many errors with `status` the daemon counted.
     fn errors(&mut self, status: Status) -> u64 {
-        let stats = self.client.stats(PATIENCE).unwrap();
+        let stats = self.io.client.stats(PATIENCE).unwrap();
         stats.errors.iter().find(|(c, _)| *c == status).map_or(0, |(_, n)| *n)
     }
 }
@@ -81,7 +74,7 @@ fn bad_records() -> (Vec<WireDelta>, Vec<WireDelta>, Vec<WireDelta>) {
 #[test]
 fn every_bad_rendezvous_request_gets_its_code_and_leaves_the_map_unchanged() {
     let mut f = Fixture::new("bad-rendezvous");
-    let raw = &f.raw;
+    let raw = &f.io.raw;
     let good = RendezvousRequest { expected_version: Some(2), ..RendezvousRequest::new(1, belief()) };
     let h = good.header(Mode::Solve, 1, [0, 0]);
     assert_eq!(raw.rendezvous(h, &[]).status, Status::Ok as u32, "the unmodified request is fine");
@@ -122,19 +115,19 @@ fn every_bad_rendezvous_request_gets_its_code_and_leaves_the_map_unchanged() {
         ("too many deltas", h, too_many, Status::OverCapacity),
     ];
     for (what, header, records, expected) in cases {
-        let reply = f.raw.rendezvous(header, &records);
+        let reply = f.io.raw.rendezvous(header, &records);
         let got = Status::try_from(reply.status).unwrap();
         assert_eq!(got, expected, "{what}: {}", reply.detail.text());
         assert!(!reply.detail.text().is_empty(), "{what}: an error says why");
         f.assert_unchanged(what);
     }
     // A delta error names the failing delta.
-    let reply = f.raw.rendezvous(h, &remove_unknown);
+    let reply = f.io.raw.rendezvous(h, &remove_unknown);
     assert_eq!(reply.error_index, 1);
     assert!(reply.detail.text().contains("no obstacle with id 99"), "{}", reply.detail.text());
     // The daemon counted every error by its code and is still serving.
     assert_eq!(f.errors(Status::InvalidBelief), 5);
-    assert_eq!(f.client.check(&RendezvousRequest::new(1, belief()), PATIENCE).unwrap().map_version, 2);
+    assert_eq!(f.io.client.check(&RendezvousRequest::new(1, belief()), PATIENCE).unwrap().map_version, 2);
 }
 
 /// `upload(id, index, count)`: chunk `index` of `count` of upload `id` of map 1,
@@ -210,7 +203,7 @@ fn every_bad_map_request_gets_its_code_and_leaves_the_map_unchanged() {
         ),
     ];
     for (what, header, records, expected) in map_cases {
-        let (reply, _) = f.raw.map(header, &records);
+        let (reply, _) = f.io.raw.map(header, &records);
         let r = rejection(&reply);
         assert_eq!(Status::try_from(reply.status).unwrap(), expected, "{what}: {r}");
         assert!(!r.message.is_empty(), "{what}");
@@ -225,7 +218,7 @@ fn upload_chunks_out_of_sequence_are_refused_and_only_a_complete_upload_changes_
     let mut f = Fixture::new("bad-chunks");
     let (bounds, one_pole) = (f.bounds, one_pole());
     let upload = |id, index, count| upload(bounds, id, index, count);
-    let raw = &f.raw;
+    let raw = &f.io.raw;
     let status = |h: MapRequestHeader| Status::try_from(raw.map(h, &one_pole).0.status).unwrap();
     assert_eq!(status(upload(10, 0, 3)), Status::Ok);
     assert_eq!(status(upload(10, 0, 3)), Status::ChunkDuplicate);
@@ -237,13 +230,13 @@ fn upload_chunks_out_of_sequence_are_refused_and_only_a_complete_upload_changes_
     assert_eq!(status(upload(10, 2, 3)), Status::ChunkIncomplete);
     f.assert_unchanged("an incomplete upload");
     // Completing the new one replaces the map whole, as one change.
-    let raw = &f.raw;
+    let raw = &f.io.raw;
     assert_eq!(Status::try_from(raw.map(upload(11, 1, 2), &one_pole).0.status).unwrap(), Status::Ok);
-    let replaced = f.client.snapshot(1, PATIENCE).unwrap();
+    let replaced = f.io.client.snapshot(1, PATIENCE).unwrap();
     assert_eq!(replaced.version(), f.before.version() + 1);
     assert_eq!(replaced.obstacles().keys().copied().collect::<Vec<_>>(), vec![9]);
     assert_eq!(f.errors(Status::ChunkIncomplete), 1);
-    let check = f.client.check(&RendezvousRequest::new(1, belief()), PATIENCE).unwrap();
+    let check = f.io.client.check(&RendezvousRequest::new(1, belief()), PATIENCE).unwrap();
     assert_eq!(check.map_version, replaced.version());
 }
 
@@ -252,8 +245,7 @@ fn the_client_refuses_what_it_cannot_send() {
     let sandbox = Sandbox::new("local");
     let _daemon = sandbox.start_daemon(&[]);
     let mut client = sandbox.client();
-    let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
-    client.create_map(1, bounds, Sun::new(0.7, 2.1).unwrap(), PATIENCE).unwrap();
+    let bounds = create_test_map(&mut client, 1);
     let deltas = vec![MapDelta::Clear; MAX_DELTAS_PER_MESSAGE + 1];
     let err = client.apply(1, None, &deltas, PATIENCE).unwrap_err();
     assert_eq!(err.status(), Some(Status::OverCapacity), "{err}");

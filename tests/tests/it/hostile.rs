@@ -14,7 +14,9 @@ use dyfos_shared::wire::map::{MapRequest, MapRequestHeader, WireDelta, encode_de
 use dyfos_shared::wire::rendezvous::{Mode, RendezvousReply, RendezvousRequestHeader, WireParams};
 use dyfos_shared::wire::{ANY_VERSION, Rejection};
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
-use dyfos_tests::{PATIENCE, RawClient, Sandbox, bin, data, without_micros};
+use dyfos_tests::{
+    PATIENCE, RawClient, RawFixture, Sandbox, bin, create_test_map, data, param_floats_mut, without_micros,
+};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
@@ -163,23 +165,8 @@ fn decoded_status(header: &RendezvousRequestHeader, records: &[WireDelta]) -> Op
 /// Sets float number `field` of a rendezvous header: 0..17 the parameters, 17..20
 /// the belief mean, 20..29 its covariance.
 fn set_float(h: &mut RendezvousRequestHeader, field: usize, v: f64) {
-    let p = &mut h.params;
     match field {
-        0 => p.rover_radius = v,
-        1 => p.marker_size = v,
-        2 => p.marker_height = v,
-        3 => p.viewer_radius = v,
-        4 => p.safety_margin = v,
-        5 => p.z_min = v,
-        6 => p.z_max = v,
-        7 => p.camera_pitch = v,
-        8..=10 => p.t_vs[field - 8] = v,
-        11 => p.f_h = v,
-        12 => p.f_v = v,
-        13 => p.rho_min = v,
-        14 => p.rho_max = v,
-        15 => p.kappa = v,
-        16 => p.lambda = v,
+        0..17 => *param_floats_mut(&mut h.params)[field] = v,
         17..=19 => h.mean[field - 17] = v,
         _ => h.cov[(field - 20) / 3][(field - 20) % 3] = v,
     }
@@ -192,10 +179,7 @@ fn set_float(h: &mut RendezvousRequestHeader, field: usize, v: f64) {
 /// untouched, and the daemon stops cleanly without having panicked.
 struct Hostile {
     good: WellFormed,
-    raw: RawClient,
-    client: Client,
-    daemon: dyfos_tests::DaemonProcess,
-    _sandbox: Sandbox,
+    io: RawFixture,
     example: Scenario,
     bounds: Bounds,
     /// Map 2 as the daemon must hold it.
@@ -208,29 +192,27 @@ struct Hostile {
 
 impl Hostile {
     fn new(name: &str) -> Hostile {
-        let sandbox = Sandbox::new(name);
-        let daemon = sandbox.start_daemon(&[]);
-        let mut client = sandbox.client();
+        let mut io = RawFixture::new(name);
+        let client = &mut io.client;
         let example = scenario("example.json");
         client.upload_map(1, &example.world, false, PATIENCE).unwrap();
-        let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
-        client.create_map(2, bounds, Sun::new(0.7, 2.1).unwrap(), PATIENCE).unwrap();
+        let bounds = create_test_map(client, 2);
         client.apply(2, Some(0), &[pole(1, 2.0), pole(2, -3.0)], PATIENCE).unwrap();
         let model = client.snapshot(2, PATIENCE).unwrap();
-        let good = WellFormed::start(&sandbox, 1, example.clone());
-        let raw = RawClient::open(&sandbox);
+        let good = WellFormed::start(&io.sandbox, 1, example.clone());
         let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
         let valid =
             RendezvousRequest { algorithm: Algorithm::Center, budget: Some(500), ..RendezvousRequest::new(2, belief) }
                 .header(Mode::Solve, 1, [0, 0]);
         let apply = MapRequest::Apply { map: 2, expected_version: None, deltas: vec![] }.header(0, [0, 0]);
-        Hostile { good, raw, client, daemon, _sandbox: sandbox, example, bounds, model, valid, apply }
+        Hostile { good, io, example, bounds, model, valid, apply }
     }
 
     /// The checks every hostile test ends with; `failed` is how many requests the
     /// daemon must at least have counted as failed.
     fn finish(self, failed: u64) {
-        let Hostile { good, raw, mut client, mut daemon, _sandbox, example, model, .. } = self;
+        let Hostile { good, io: RawFixture { raw, mut client, mut daemon, sandbox: _sandbox }, example, model, .. } =
+            self;
         assert!(good.finish() > 0);
         assert_eq!(client.snapshot(1, PATIENCE).unwrap(), example.world);
         assert_eq!(client.snapshot(2, PATIENCE).unwrap(), model, "map 2 differs from what its accepted batches make");
@@ -249,7 +231,7 @@ impl Hostile {
 #[test]
 fn random_rendezvous_requests_get_the_decoders_code() {
     let h = Hostile::new("hostile-rv");
-    let (raw, valid) = (&h.raw, h.valid);
+    let (raw, valid) = (&h.io.raw, h.valid);
     let mut rng = ChaCha8Rng::seed_from_u64(6);
     let mut checked = 0u64;
     // --- random bytes, and valid requests with one field made random -------------
@@ -295,7 +277,7 @@ fn random_rendezvous_requests_get_the_decoders_code() {
 #[test]
 fn random_map_requests_do_what_a_model_of_the_map_says() {
     let mut h = Hostile::new("hostile-map");
-    let (raw, apply) = (&h.raw, h.apply);
+    let (raw, apply) = (&h.io.raw, h.apply);
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let mut model = h.model.clone();
     let mut failed = 0u64;
@@ -366,7 +348,7 @@ fn random_map_requests_do_what_a_model_of_the_map_says() {
 #[test]
 fn nan_and_infinities_in_every_float_are_refused() {
     let h = Hostile::new("hostile-nan");
-    let (raw, valid, apply, bounds) = (&h.raw, h.valid, h.apply, h.bounds);
+    let (raw, valid, apply, bounds) = (&h.io.raw, h.valid, h.apply, h.bounds);
     // --- NaN and infinities in every float -----------------------------------------
     for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
         for field in 0..29 {
@@ -423,7 +405,7 @@ fn nan_and_infinities_in_every_float_are_refused() {
 #[test]
 fn huge_and_negative_counts_unknown_tags_and_disagreeing_counts_get_their_codes() {
     let h = Hostile::new("hostile-huge");
-    let (raw, valid, apply, bounds) = (&h.raw, h.valid, h.apply, h.bounds);
+    let (raw, valid, apply, bounds) = (&h.io.raw, h.valid, h.apply, h.bounds);
     // --- huge and negative counts, unknown tags, counts that disagree -------------
     let run = |n: i64, cells: &[[i64; 3]]| {
         let mut r = vec![WireDelta {
@@ -546,7 +528,7 @@ fn huge_and_negative_counts_unknown_tags_and_disagreeing_counts_get_their_codes(
 #[test]
 fn chunk_sequences_out_of_order_duplicated_or_never_finished_are_refused() {
     let mut h = Hostile::new("hostile-chunk");
-    let (raw, bounds) = (&h.raw, h.bounds);
+    let (raw, bounds) = (&h.io.raw, h.bounds);
     // --- chunk sequences: out of order, duplicated, never finished -----------------
     let chunk = |upload_id: u64, map: MapId, index: u32, count: u32| {
         let h = MapRequest::Upload {
@@ -575,8 +557,8 @@ fn chunk_sequences_out_of_order_duplicated_or_never_finished_are_refused() {
     let started: Vec<Status> = (0..MAX_PENDING_UPLOADS as u64 + 1).map(|m| chunk(50 + m, 100 + m, 0, 2)).collect();
     let full = started.iter().position(|s| *s == Status::OverCapacity).expect("a limit on unfinished uploads");
     assert!(started[..full].iter().all(|s| *s == Status::Ok) && full < MAX_PENDING_UPLOADS, "{started:?}");
-    assert_eq!(h.client.snapshot(2, PATIENCE).unwrap(), h.model, "unfinished uploads changed map 2");
-    let err = h.client.snapshot(100, PATIENCE).unwrap_err();
+    assert_eq!(h.io.client.snapshot(2, PATIENCE).unwrap(), h.model, "unfinished uploads changed map 2");
+    let err = h.io.client.snapshot(100, PATIENCE).unwrap_err();
     assert_eq!(err.status(), Some(Status::UnknownMap), "an unfinished upload created a map: {err}");
 
     h.finish(5);

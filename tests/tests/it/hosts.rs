@@ -383,16 +383,7 @@ fn demo_on_two_hosts_prints_the_one_host_table() {
     let files = MissionFiles::new(&sandbox, &small_mission());
     let table = |hosts: &str| {
         let out_dir = sandbox.state_dir.with_extension(format!("demo-{hosts}"));
-        let out = std::process::Command::new(dyfos_tests::bin("dyfos"))
-            .args(["demo", "--time-scale", "0", "--algos", "dyfos,center", "--seed", "2", "--hosts", hosts])
-            .arg("--mission")
-            .arg(&files.mission)
-            .arg("--out")
-            .arg(&out_dir)
-            .output()
-            .unwrap();
-        let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-        assert!(out.status.success(), "--hosts {hosts}: {stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+        let stdout = files.demo(&out_dir, &["--seed", "2", "--hosts", hosts]);
         let _ = std::fs::remove_dir_all(&out_dir);
         let start = stdout.find("APE (cm)").expect("a table");
         stdout[start..].lines().take(6).map(str::to_string).collect::<Vec<_>>()

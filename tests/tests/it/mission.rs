@@ -181,16 +181,7 @@ fn demo_prints_the_ape_table_and_draws_each_run() {
     let sandbox = Sandbox::new("mission-demo");
     let files = MissionFiles::new(&sandbox, &small_mission());
     let out_dir = sandbox.state_dir.with_extension("demo");
-    let out = Command::new(bin("dyfos"))
-        .args(["demo", "--time-scale", "0", "--algos", "dyfos,center"])
-        .arg("--mission")
-        .arg(&files.mission)
-        .arg("--out")
-        .arg(&out_dir)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = files.demo(&out_dir, &[]);
     let header = stdout.lines().find(|l| l.starts_with("APE (cm)")).expect("a table header");
     assert_eq!(header.split_whitespace().skip(2).collect::<Vec<_>>(), ["dyfos", "center", "dead-reckoning"]);
     let rmse: Vec<f64> = stdout

@@ -196,9 +196,7 @@ fn rover_and_viewer_write_missions_that_match_their_event_logs() {
     let _daemon = sandbox.start_daemon(&[]);
     let mission = small_mission();
     let files = MissionFiles::new(&sandbox, &mission);
-    let dir = sandbox.state_dir.with_extension("mcap");
-    std::fs::create_dir_all(&dir).unwrap();
-    let (rover_file, viewer_file) = (dir.join("rover.mcap"), dir.join("viewer.mcap"));
+    let (rover_file, viewer_file) = files.mcap_files();
     let recorder = files.recorder("m");
     let mut viewer = files.viewer("m", "dyfos", 7, &["--mcap", viewer_file.to_str().unwrap()]);
     let mut rover = files.rover("m", 7, "0", &["--mcap", rover_file.to_str().unwrap()]);
@@ -273,7 +271,6 @@ fn rover_and_viewer_write_missions_that_match_their_event_logs() {
     let observed = trace.measurements.iter().filter(|m| matches!(m.observation, Observation::Observed { .. })).count();
     assert_eq!(observed, n);
     assert!(topics["/rover/pose"].is_empty(), "the viewer does not record the truth");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Reads a ROS 2-profile file: checks the summary (profile `ros2`, CDR messages,
@@ -316,9 +313,7 @@ fn rover_and_viewer_write_ros2_bags_on_request() {
     let _daemon = sandbox.start_daemon(&[]);
     let mission = small_mission();
     let files = MissionFiles::new(&sandbox, &mission);
-    let dir = sandbox.state_dir.with_extension("mcap");
-    std::fs::create_dir_all(&dir).unwrap();
-    let (rover_file, viewer_file) = (dir.join("rover.mcap"), dir.join("viewer.mcap"));
+    let (rover_file, viewer_file) = files.mcap_files();
     let ros2 = |file: &Path| ["--mcap".to_string(), file.display().to_string(), "--mcap-profile".into(), "ros2".into()];
     let (rover_args, viewer_args) = (ros2(&rover_file), ros2(&viewer_file));
     let recorder = files.recorder("m");
@@ -356,7 +351,6 @@ fn rover_and_viewer_write_ros2_bags_on_request() {
     assert_eq!(topics["/viewer/pose"].len(), n + 1, "take-off and each rendezvous");
     assert_eq!(topics["/viewer/camera"].len(), n);
     assert!(topics["/rover/pose"].is_empty(), "the viewer does not record the truth");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

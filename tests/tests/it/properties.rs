@@ -21,6 +21,7 @@ use dyfos_shared::wire::map::{
 };
 use dyfos_shared::wire::rendezvous::{Mode, RendezvousRequestHeader, WireParams};
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
+use dyfos_tests::param_floats_mut;
 use proptest::prelude::*;
 
 /// Any f64, weighted towards the values that break things.
@@ -109,27 +110,6 @@ fn any_header() -> impl Strategy<Value = RendezvousRequestHeader> {
         })
 }
 
-fn params_floats(p: &WireParams) -> Vec<f64> {
-    let mut v = vec![
-        p.rover_radius,
-        p.marker_size,
-        p.marker_height,
-        p.viewer_radius,
-        p.safety_margin,
-        p.z_min,
-        p.z_max,
-        p.camera_pitch,
-        p.f_h,
-        p.f_v,
-        p.rho_min,
-        p.rho_max,
-        p.kappa,
-        p.lambda,
-    ];
-    v.extend(p.t_vs);
-    v
-}
-
 /// A valid delta (for some world): obstacles with ids 1..12 in ±9 m, voxels of one
 /// grid, a sun, bounds, clear.
 fn valid_delta() -> impl Strategy<Value = MapDelta> {
@@ -216,7 +196,7 @@ proptest! {
         match dyfos_shared::wire::rendezvous::RendezvousRequest::decode(&header, &records) {
             Ok((request, mode)) => {
                 let numbers = header.mean.iter().chain(header.cov.iter().flatten()).copied()
-                    .chain(params_floats(&header.params));
+                    .chain(param_floats_mut(&mut { header.params }).map(|f| *f));
                 prop_assert!(numbers.into_iter().all(f64::is_finite), "accepted a non-finite number");
                 prop_assert!(header.mode <= 1 && header.algorithm < 5);
                 let again = request.header(mode, header.request_id, header.reply_to);

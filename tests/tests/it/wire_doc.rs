@@ -858,13 +858,7 @@ fn documented_client_port_settings_loan_every_size_a_request_may_have() {
 
     let sandbox = Sandbox::new("wire-doc-loan");
     let _daemon = sandbox.start_daemon(&[]);
-    let config = services::iceoryx_config(Some(&sandbox.domain)).expect("domain");
-    let node = NodeBuilder::new()
-        .config(&config)
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .expect("node");
-    let names = ServiceNames::new(&sandbox.prefix).expect("prefix");
+    let (node, names) = sandbox.ipc_node();
     let services = services::Services::new(&node, &names);
     let rendezvous = services.rendezvous().expect("service name").open().expect("open rendezvous");
     let map = services.map().expect("service name").open().expect("open map");

@@ -61,7 +61,7 @@ import os as _os
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
 
 from . import _dyfos
-from .voxels import MAX_DELTAS_PER_BATCH, Voxels
+from .voxels import MAX_DELTAS_PER_BATCH, Voxels, _octomap_bytes
 
 __all__ = [
     "ALGORITHMS",
@@ -509,17 +509,9 @@ class Client:
                 is wrong), or ``map_id`` holds another map (``map_exists``).
             DyfosError: ``over_capacity`` when the map has too many cells.
         """
-        if isinstance(octomap, (bytes, bytearray)):
-            data = bytes(octomap)
-        else:
-            try:
-                with open(octomap, "rb") as f:
-                    data = f.read()
-            except OSError as e:
-                raise InvalidRequestError("invalid_delta", f"cannot read OctoMap file {octomap}: {e}") from e
         return self._raw.upload_octomap(
             map_id,
-            data,
+            _octomap_bytes(octomap),
             _floats(bounds, 4, "bounds"),
             tuple(_floats(sun, 2, "sun")),
             _floats(origin, 3, "origin"),
@@ -701,7 +693,7 @@ class Client:
         """
         p, d, ds = self._request(params, deadline, deltas)
         raw = self._raw.rendezvous(
-            map_id, mean, cov, algorithm, seed, p, budget, d, expected_version, ds, None if timeout is None else _seconds(timeout, "timeout")
+            False, map_id, mean, cov, algorithm, seed, p, budget, d, expected_version, ds, None if timeout is None else _seconds(timeout, "timeout")
         )
         return Answer(raw)
 
@@ -724,6 +716,6 @@ class Client:
         the map) and answers at once without searching or changing the map. Returns
         the map version the query would search. Raises as :meth:`rendezvous`."""
         p, d, ds = self._request(params, deadline, deltas)
-        return self._raw.check(
-            map_id, mean, cov, algorithm, seed, p, budget, d, expected_version, ds, None if timeout is None else _seconds(timeout, "timeout")
+        return self._raw.rendezvous(
+            True, map_id, mean, cov, algorithm, seed, p, budget, d, expected_version, ds, None if timeout is None else _seconds(timeout, "timeout")
         )

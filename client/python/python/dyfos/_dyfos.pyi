@@ -1,6 +1,6 @@
 """Type stub of the private extension module ``dyfos._dyfos`` (use ``dyfos`` instead)."""
 
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 DEFAULT_PREFIX: str
 MAX_DELTAS_PER_BATCH: int
@@ -75,6 +75,7 @@ class RawClient:
     def list_maps(self, timeout: Optional[float] = None) -> List[Dict[str, Any]]: ...
     def rendezvous(
         self,
+        check: bool,
         map_id: int,
         mean: Any,
         cov: Any,
@@ -86,21 +87,9 @@ class RawClient:
         expected_version: Optional[int],
         deltas: Optional[str],
         timeout: Optional[float],
-    ) -> RawAnswer: ...
-    def check(
-        self,
-        map_id: int,
-        mean: Any,
-        cov: Any,
-        algorithm: str,
-        seed: int,
-        params: Optional[str],
-        budget: Optional[int],
-        deadline: Optional[float],
-        expected_version: Optional[int],
-        deltas: Optional[str],
-        timeout: Optional[float],
-    ) -> int: ...
+    ) -> Union[RawAnswer, int]:
+        """With ``check`` false the answer; with ``check`` true the map version the
+        request would search (check mode: validated, not searched)."""
     def _rust_round_trips(
         self,
         map_id: int,

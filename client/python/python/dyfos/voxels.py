@@ -67,17 +67,7 @@ class Voxels:
         cls, octomap: Union[str, "_os.PathLike[str]", bytes], origin: Sequence[float] = (0.0, 0.0, 0.0)
     ) -> "Voxels":
         """The occupied cells of an OctoMap ``.bt`` file (its path or bytes)."""
-        if isinstance(octomap, (bytes, bytearray, memoryview)):
-            data = bytes(octomap)
-        else:
-            try:
-                with open(octomap, "rb") as f:
-                    data = f.read()
-            except OSError as e:
-                from . import InvalidRequestError
-
-                raise InvalidRequestError("invalid_delta", f"cannot read OctoMap file {octomap}: {e}") from e
-        return cls(_dyfos.RawVoxels.from_octomap(data, _point3(origin, "origin")))
+        return cls(_dyfos.RawVoxels.from_octomap(_octomap_bytes(octomap), _point3(origin, "origin")))
 
     @classmethod
     def from_octomap_message(cls, msg: Any, origin: Sequence[float] = (0.0, 0.0, 0.0)) -> "Voxels":
@@ -137,3 +127,17 @@ class Voxels:
 
     def __repr__(self) -> str:
         return f"dyfos.Voxels({len(self)} cells, resolution={self.resolution!r}, origin={self.origin!r})"
+
+
+def _octomap_bytes(octomap: Union[str, "_os.PathLike[str]", bytes, bytearray, memoryview]) -> bytes:
+    """An OctoMap ``.bt`` file's bytes, given them or its path; a file that cannot be
+    read is ``InvalidRequestError`` (``invalid_delta``)."""
+    if isinstance(octomap, (bytes, bytearray, memoryview)):
+        return bytes(octomap)
+    try:
+        with open(octomap, "rb") as f:
+            return f.read()
+    except OSError as e:
+        from . import InvalidRequestError
+
+        raise InvalidRequestError("invalid_delta", f"cannot read OctoMap file {octomap}: {e}") from e
