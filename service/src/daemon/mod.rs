@@ -24,7 +24,7 @@
 //! Where things are: `ports.rs` (the iceoryx2 ports), `state.rs` (what the
 //! handlers change), one folder or file per service (`rendezvous/`, `map/`,
 //! `stats.rs`), `reject.rs` (the refusals they share), `pool.rs` (the workers),
-//! `cpu/` (how the daemon shares the CPU), `record/` (`--record`), `config.rs`.
+//! `cpu/` (how the daemon shares the CPU), `record/` (`--record`), `config/` (the configuration, loaded once).
 //!
 //! Threading: one IPC thread (the caller's) owns the maps, validates every request,
 //! applies map changes and answers map and stats requests itself. Searches go to a

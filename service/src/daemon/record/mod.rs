@@ -19,15 +19,16 @@
 //! written in the shortest form that parses back to the same bits. [`replay`]
 //! re-runs a recording's queries against this build.
 
+mod exchange;
 mod format;
+mod map_state;
 mod recorder;
 pub mod replay;
 mod writer;
 
-pub use format::{
-    ChangeCause, MapChange, MapState, RebuildError, RecordedBelief, RecordedReply, RecordedRequest, content_of,
-    json_schema, params_to_json, topics,
-};
+pub use exchange::{RebuildError, RecordedBelief, RecordedReply, RecordedRequest};
+pub use format::{json_schema, params_to_json, topics};
+pub use map_state::{ChangeCause, MapChange, MapState, content_of};
 pub use recorder::FLUSH_EVERY;
 pub(crate) use recorder::TrafficRecorder;
 

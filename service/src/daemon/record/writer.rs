@@ -1,7 +1,9 @@
 //! The MCAP file of a recording: its head (configuration and every map), its
 //! messages, and its rotation once it is full.
 
-use super::format::{MapChange, MapState, RecordedReply, RecordedRequest, RendezvousMessage, json_schema, topics};
+use super::exchange::{RecordedReply, RecordedRequest, RendezvousMessage};
+use super::format::{json_schema, topics};
+use super::map_state::{MapChange, MapState};
 use super::{ChangeCause, Record, RecordConfig, unix_ns};
 use dyfos_shared::wire::map::MapId;
 use dyfos_shared::wire::rendezvous::Mode;
