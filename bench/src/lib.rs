@@ -4,6 +4,7 @@
 //! `dyfos-bench` binary (and the test suite) drive.
 //!
 //! - [`numerical`]: the seeded random maps of SPEC §10, with voxel variants;
+//! - [`compare`]: two builds' `dyfos solve` interleaved on the same scenarios (`dyfos-bench compare`);
 //! - [`evaluation`]: runs search algorithms over maps, tabulates cost E and run time;
 //! - [`latency`]: the request mix, drivers, in-process baseline and iceoryx2 floor of
 //!   `dyfos-bench latency`;
@@ -22,6 +23,7 @@
 //! assert!(run.queries[0][0].feasible());
 //! ```
 
+pub mod compare;
 pub mod evaluation;
 pub mod latency;
 pub mod learned;

@@ -16,7 +16,11 @@
 //! assert!(cells.iter().all(|c| (0..b.side).contains(&c[0]) && (0..=WALL_CELLS).contains(&c[2])));
 //! ```
 
-use dyfos_shared::world::CellIndex;
+use crate::numerical::{NumericalConfig, numerical_map};
+use dyfos_shared::math::Point3;
+use dyfos_shared::posterior::Belief;
+use dyfos_shared::scenario::Scenario;
+use dyfos_shared::world::{Bounds, CellIndex, Sun, VoxelGrid, World};
 
 /// Cell side of the building, m.
 pub const RESOLUTION: f64 = 0.05;
@@ -73,6 +77,33 @@ impl Building {
         (0..side).flat_map(move |i| {
             (0..side).flat_map(move |j| (0..=WALL_CELLS).filter(move |k| self.solid(i, j, *k)).map(move |k| [i, j, k]))
         })
+    }
+
+    /// The map bounds: the building's square, cell (0, 0, 0) at the origin.
+    pub fn bounds(&self) -> anyhow::Result<Bounds> {
+        let side = self.side as f64 * RESOLUTION;
+        Ok(Bounds::new([0.0, 0.0, side, side])?)
+    }
+
+    /// The sun of every building map.
+    pub fn sun() -> Sun {
+        Sun::new(0.6, 2.4).expect("a valid sun")
+    }
+
+    /// The building as a world with its cells as the voxel grid.
+    pub fn world(&self) -> anyhow::Result<World> {
+        let grid = VoxelGrid::new(RESOLUTION, Point3::origin(), self.cells())?;
+        Ok(World::new(0, self.bounds()?, Self::sun(), [], Some(grid))?)
+    }
+
+    /// A scenario looking at the building in `world`: the rover in room (1, 1), the
+    /// viewer below the ceiling, SPEC §10's other parameters.
+    pub fn scenario(&self, world: World) -> anyhow::Result<Scenario> {
+        let rover = self.room_centre(1, 1, 0.3);
+        let belief = Belief::new(rover, [[0.04, 0.0, 0.0], [0.0, 0.04, 0.0], [0.0, 0.0, 0.02]])?;
+        let mut params = numerical_map(1, 0, &NumericalConfig::paper()).params;
+        params.z_max = 2.4;
+        Ok(Scenario { world, belief, params })
     }
 
     /// The centre of room (a, b) at height `z`, m, with the building's cell

@@ -199,7 +199,7 @@ impl<'a> Lupp<'a> {
 
     #[inline]
     fn noise(&self, pose: &SensorPose) -> Cov2 {
-        self.model.noise(&self.features(pose))
+        self.model.noise_at(&self.params, self.half_fov_tangents, &self.sun, pose, &self.targets[0], self.heading)
     }
 
     /// The SDSMM features of observing the rover from `pose` (SPEC §6), with the

@@ -93,6 +93,20 @@ impl Features {
         pose: &SensorPose,
         target: &Point3<f64>,
     ) -> Self {
+        Self::compute(params, half_fov_tangents, sun, pose, target, true)
+    }
+
+    /// The features; with `angles` false, the elevation and bearing (two `atan2`) are
+    /// left NaN for a model that reads neither. Every other field is the same.
+    #[inline(always)]
+    fn compute(
+        params: &Params,
+        half_fov_tangents: [f64; 2],
+        sun: &Vector3<f64>,
+        pose: &SensorPose,
+        target: &Point3<f64>,
+        angles: bool,
+    ) -> Self {
         let q = pose.to_sensor(target);
         let u = (q.y / q.x) / half_fov_tangents[0];
         let v = (q.z / q.x) / half_fov_tangents[1];
@@ -109,8 +123,11 @@ impl Features {
             // pow(g, 1) is g exactly (IEEE 754); the default κ skips the call.
             2.0 * if params.kappa == 1.0 { g } else { g.powf(params.kappa) }
         };
-        let elevation = w.z.atan2(w.x.hypot(w.y));
-        let bearing = (target.y - pose.position.y).atan2(target.x - pose.position.x);
+        let (elevation, bearing) = if angles {
+            (w.z.atan2(w.x.hypot(w.y)), (target.y - pose.position.y).atan2(target.x - pose.position.x))
+        } else {
+            (f64::NAN, f64::NAN)
+        };
         Features { u, v, e, s, c, w, elevation, bearing, rho, rover_heading: 0.0 }
     }
 
@@ -179,6 +196,34 @@ impl NoiseModel {
     }
 }
 
+impl NoiseModel {
+    /// The noise of observing the marker centre `target` from `pose` with the rover's
+    /// heading `theta`: [`Sdsmm::noise`] of [`Features::with_half_fov_tangents`] with
+    /// that heading, bit for bit, without the viewing angles `paper` and
+    /// `anisotropic` do not read (the search's hot path).
+    #[inline]
+    pub fn noise_at(
+        &self,
+        params: &Params,
+        half_fov_tangents: [f64; 2],
+        sun: &Vector3<f64>,
+        pose: &SensorPose,
+        target: &Point3<f64>,
+        theta: f64,
+    ) -> Cov2 {
+        match self {
+            NoiseModel::Paper(m) => m.noise(&Features::compute(params, half_fov_tangents, sun, pose, target, false)),
+            NoiseModel::Anisotropic(m) => {
+                m.noise(&Features::compute(params, half_fov_tangents, sun, pose, target, false))
+            }
+            NoiseModel::Learned(_) | NoiseModel::Synthetic(_) => self.noise(
+                &Features::with_half_fov_tangents(params, half_fov_tangents, sun, pose, target)
+                    .with_rover_heading(theta),
+            ),
+        }
+    }
+}
+
 impl Sdsmm for NoiseModel {
     #[inline]
     fn noise(&self, features: &Features) -> Cov2 {
@@ -187,6 +232,56 @@ impl Sdsmm for NoiseModel {
             NoiseModel::Anisotropic(m) => m.noise(features),
             NoiseModel::Learned(m) => m.noise(features),
             NoiseModel::Synthetic(m) => m.noise(features),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sensor::{SensorRig, SensorState};
+    use crate::world::Sun;
+
+    /// The search's shortcut gives every model's noise bit for bit, for suns above and
+    /// below the horizon, κ = 1 and not, and views from every side.
+    #[test]
+    fn noise_at_is_noise_of_the_features_bit_for_bit() {
+        let learned = Learned::from_bytes(include_bytes!("../../../tests/data/learned/model.bin")).unwrap();
+        let models = [
+            NoiseModel::Paper(Paper),
+            NoiseModel::Anisotropic(Anisotropic { lambda: 3.0 }),
+            NoiseModel::Learned(Arc::new(learned)),
+            NoiseModel::Synthetic(Synthetic::default()),
+        ];
+        let mut k = 0u32;
+        for kappa in [1.0, 2.5] {
+            let params = Params { kappa, ..Params::default() };
+            let rig = SensorRig::new(&params);
+            let tangents = Features::half_fov_tangents(&params);
+            for (elevation, azimuth) in [(0.7, 2.1), (-0.2, 0.3), (1.2, -2.9)] {
+                let sun = Sun::new(elevation, azimuth).unwrap().direction();
+                for i in 0..400 {
+                    k = k.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+                    let r = |j: u32| f64::from((k >> (j * 4)) & 0xffff) / 65_535.0;
+                    let x = SensorState::new(
+                        1.0 + 5.0 * r(0),
+                        (r(1) - 0.5) * params.f_h,
+                        (r(2) - 0.5) * params.f_v,
+                        f64::from(i) * 0.37,
+                    );
+                    let target = Point3::new(r(3) * 4.0 - 2.0, r(4) - 0.5, 0.2);
+                    let pose = rig.pose(&target, &x);
+                    let theta = r(5) * 6.0 - 3.0;
+                    for model in &models {
+                        let f = Features::with_half_fov_tangents(&params, tangents, &sun, &pose, &target)
+                            .with_rover_heading(theta);
+                        let want = model.noise(&f);
+                        let got = model.noise_at(&params, tangents, &sun, &pose, &target, theta);
+                        let bits = |c: &Cov2| c.matrix().map(f64::to_bits);
+                        assert_eq!(bits(&got), bits(&want), "{model:?} at {x:?}");
+                    }
+                }
+            }
         }
     }
 }

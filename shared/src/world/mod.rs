@@ -497,6 +497,133 @@ mod tests {
         }
     }
 
+    /// A dense map of cylinders (some short) and boxes (one floating), and segments
+    /// made to graze them: tangent to a side, along a top or a face, ending exactly
+    /// on a surface, vertical at a rim, from far outside, and sight-line fans.
+    fn grazing_cases(rng: &mut Lcg, n: usize) -> (World, Vec<Vec<Segment>>) {
+        let mut obstacles = Vec::new();
+        for i in 0..n {
+            let o = if i % 5 == 4 {
+                let min = Point3::new(
+                    rng.next() * 18.0 - 9.0,
+                    rng.next() * 18.0 - 9.0,
+                    if i % 10 == 9 { 1.0 + rng.next() * 2.0 } else { 0.0 },
+                );
+                Obstacle::Box(AxisBox {
+                    min,
+                    max: min + Vector3::new(0.3 + rng.next() * 2.0, 0.3 + rng.next(), 0.5 + rng.next() * 3.0),
+                })
+            } else {
+                Obstacle::Cylinder(VerticalCylinder {
+                    center: Point2::new(rng.next() * 18.0 - 9.0, rng.next() * 18.0 - 9.0),
+                    radius: 0.2 + rng.next(),
+                    height: if i % 2 == 0 { 10.0 } else { 0.5 + rng.next() * 3.0 },
+                })
+            };
+            obstacles.push((i as u32 + 1, o));
+        }
+        let world = World::new(
+            0,
+            Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(),
+            Sun::new(0.5, 0.0).unwrap(),
+            obstacles.clone(),
+            None,
+        )
+        .unwrap();
+        let mut batches = Vec::new();
+        let unit = |v: Vector3<f64>| v.normalize();
+        for k in 0..6000 {
+            let (_, o) = obstacles[k % obstacles.len()];
+            let mut segs = Vec::new();
+            match (o, k % 6) {
+                // Tangent to the side at height z, from either way, touching or 1e-12 off.
+                (Obstacle::Cylinder(c), 0 | 1) => {
+                    let a = rng.next() * std::f64::consts::TAU;
+                    let (n, t) = (Vector3::new(a.cos(), a.sin(), 0.0), Vector3::new(-a.sin(), a.cos(), 0.0));
+                    let off = [0.0, 1e-12, -1e-12][k % 3];
+                    let p = Point3::new(c.center.x, c.center.y, rng.next() * c.height * 1.2) + n * (c.radius + off);
+                    let back = rng.next() * 6.0;
+                    segs.push(Segment::closed(p - t * back, t, back + rng.next() * 3.0));
+                }
+                // Along the top, or ending exactly on the side (open or closed end).
+                (Obstacle::Cylinder(c), 2 | 3) => {
+                    let a = rng.next() * std::f64::consts::TAU;
+                    let n = Vector3::new(a.cos(), a.sin(), 0.0);
+                    let z = if k % 6 == 2 { c.height } else { rng.next() * c.height };
+                    let target = Point3::new(c.center.x, c.center.y, z) + n * c.radius;
+                    let from = target
+                        + unit(Vector3::new(n.x + rng.next() - 0.5, n.y + rng.next() - 0.5, rng.next() - 0.3))
+                            * (0.5 + rng.next() * 6.0);
+                    let margin = [0.0, 1e-6, -1e-12][k % 3];
+                    segs.extend(Segment::sight_line(&from, &target, margin));
+                    let d = target - from;
+                    segs.push(Segment::closed(from, d / d.norm(), d.norm()));
+                }
+                // Vertical at the rim, and a collision star around a point near it.
+                (Obstacle::Cylinder(c), _) => {
+                    let a = rng.next() * std::f64::consts::TAU;
+                    let p =
+                        Point3::new(c.center.x + c.radius * a.cos(), c.center.y + c.radius * a.sin(), c.height + 2.0);
+                    segs.push(Segment::closed(p, -Vector3::z(), 2.0 + [0.0, -1e-12, 1e-12][k % 3]));
+                    let q = p + Vector3::new(rng.next() - 0.5, rng.next() - 0.5, -rng.next() * 3.0) * 1.5;
+                    for j in 0..8 {
+                        let b = a + f64::from(j) * std::f64::consts::FRAC_PI_4;
+                        segs.push(Segment::closed(q, Vector3::new(b.cos(), b.sin(), 0.0), 0.625));
+                    }
+                }
+                // Along a box face or edge, and through from outside the map.
+                (Obstacle::Box(b), 0..=2) => {
+                    let y = [b.min.y, b.max.y, b.min.y + 0.5 * (b.max.y - b.min.y)][k % 3];
+                    let z = [b.max.z, b.min.z, b.max.z][k % 3];
+                    let from = Point3::new(b.min.x - 1.0 - rng.next() * 30.0, y, z);
+                    segs.push(Segment::closed(from, Vector3::x(), b.min.x - from.x + [0.0, 1e-12, -1e-12][k % 3]));
+                }
+                // A sight-line fan from a sensor to points around the box.
+                (Obstacle::Box(b), _) => {
+                    let centre = b.min + (b.max - b.min) * 0.5;
+                    let from = centre + Vector3::new(rng.next() - 0.5, rng.next() - 0.5, 0.5) * 12.0;
+                    for j in 0..9 {
+                        let a = f64::from(j) * 0.7;
+                        let to = Point3::new(centre.x + 2.0 * a.cos(), centre.y + 2.0 * a.sin(), 0.2);
+                        segs.extend(Segment::sight_line(&from, &to, 1e-6));
+                    }
+                }
+            }
+            batches.push(segs);
+        }
+        // And plain random segments, long and short.
+        for i in 0..3000 {
+            let o = Point3::new(rng.next() * 30.0 - 15.0, rng.next() * 30.0 - 15.0, rng.next() * 12.0 - 1.0);
+            let d = unit(Vector3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5));
+            batches.push(vec![Segment::closed(o, d, rng.next() * [1.0, 8.0, 40.0][i % 3])]);
+        }
+        (world, batches)
+    }
+
+    /// The broad phase decides nothing itself: every verdict, bit for bit, is the one
+    /// of testing every obstacle, on segments that graze the obstacles.
+    #[test]
+    fn any_contact_agrees_with_scan_on_grazing_segments() {
+        let mut rng = Lcg(23);
+        for n in [1, 3, 25, 60, 300] {
+            let (world, batches) = grazing_cases(&mut rng, n);
+            let (mut hits, mut misses) = (0, 0);
+            for segs in &batches {
+                let expected = world.any_contact_by_scan(segs);
+                assert_eq!(world.any_contact(segs), expected, "n = {n}, {segs:?}");
+                for s in segs {
+                    assert_eq!(
+                        world.any_contact(std::slice::from_ref(s)),
+                        world.any_contact_by_scan(std::slice::from_ref(s)),
+                        "n = {n}, {s:?}"
+                    );
+                }
+                if expected { hits += 1 } else { misses += 1 }
+            }
+            assert!(hits > 1000 && misses > 1000, "n = {n}: {hits} hits, {misses} misses");
+        }
+    }
+
     #[test]
     fn the_index_is_built_at_the_first_query_and_kept_by_clones() {
         let mut rng = Lcg(5);

@@ -5,6 +5,7 @@
 //! The daemon, the `dyfos` command and the robots they start are the workspace's
 //! own binaries; `dyfos_tests::bin` builds them once per run if they are missing.
 
+mod compare;
 mod daemon_abandon;
 mod daemon_answers;
 mod daemon_cheap_first;

@@ -5,6 +5,7 @@
 //! Add a benchmark by adding a module with an `Args` struct and a `run` function,
 //! and one variant to [`Command`].
 
+mod compare;
 mod latency;
 mod learned;
 mod numerical;
@@ -35,6 +36,9 @@ enum Command {
     /// One client process of `latency` (started by it).
     #[command(hide = true)]
     LatencyWorker(latency::WorkerArgs),
+    /// This build's `dyfos solve` against another build's, interleaved on the same
+    /// scenarios: medians, ratios, whether every answer is identical.
+    Compare(compare::CompareArgs),
     /// The learned SDSMM against the synthetic camera it was trained on: held-out
     /// NLL, std plots, planning judged by the true model, query time.
     Learned(learned::LearnedArgs),
@@ -47,6 +51,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::LatencyWorker(args) => latency::worker(&args),
         Command::Learned(args) => learned::run(&args),
         Command::Octomap(args) => octomap::run(&args),
+        Command::Compare(args) => compare::run(&args),
     }
 }
 

@@ -13,7 +13,6 @@ use dyfos_process::child::KillOnDrop;
 use dyfos_service::launch::DyfosdCommand;
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::math::Point3;
-use dyfos_shared::posterior::Belief;
 use dyfos_shared::scenario::Scenario;
 use dyfos_shared::wire::rendezvous::RendezvousRequest;
 use dyfos_shared::world::octomap::{Octomap, write_bt};
@@ -66,23 +65,6 @@ pub fn run(args: &OctomapArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A scenario looking at the building: the rover in room (1, 1), the viewer's
-/// bounds the building's.
-fn building_scenario(building: &Building, world: World) -> anyhow::Result<Scenario> {
-    let rover = building.room_centre(1, 1, 0.3);
-    let belief = Belief::new(rover, [[0.04, 0.0, 0.0], [0.0, 0.04, 0.0], [0.0, 0.0, 0.02]])?;
-    let mut params = numerical_map(1, 0, &NumericalConfig::paper()).params;
-    params.z_max = 2.4;
-    Ok(Scenario { world, belief, params })
-}
-
-fn building_world(building: &Building) -> anyhow::Result<World> {
-    let side = building.side as f64 * RESOLUTION;
-    let bounds = Bounds::new([0.0, 0.0, side, side])?;
-    let grid = dyfos_shared::world::VoxelGrid::new(RESOLUTION, Point3::origin(), building.cells())?;
-    Ok(World::new(0, bounds, Sun::new(0.6, 2.4)?, [], Some(grid))?)
-}
-
 /// In-process `dyfos` queries: CPU-µs per candidate on cylinder maps, the same maps
 /// as 0.1 and 0.05 m grids, the real OctoMap scenarios and a building.
 fn query_costs(args: &OctomapArgs) -> anyhow::Result<String> {
@@ -105,14 +87,10 @@ fn query_costs(args: &OctomapArgs) -> anyhow::Result<String> {
         rows.push((format!("OctoMap {}", path.display()), cells, vec![scenario; n]));
     }
     let building = Building::with_cells(2_000_000);
-    let world = building_world(&building)?;
+    let world = building.world()?;
     let cells = world.voxels().map_or(0, |v| v.len());
     let side = building.side as f64 * RESOLUTION;
-    rows.push((
-        format!("building {side:.0} × {side:.0} m, 0.05 m"),
-        cells,
-        vec![building_scenario(&building, world)?; n],
-    ));
+    rows.push((format!("building {side:.0} × {side:.0} m, 0.05 m"), cells, vec![building.scenario(world)?; n]));
 
     let mut out = format!(
         "### `dyfos` query cost per candidate, in process, one thread ({n} queries a map, seeds 1..={n})\n\n\
@@ -262,7 +240,7 @@ fn daemon_run(args: &OctomapArgs, cells: u64) -> anyhow::Result<String> {
     }
 
     // Queries through the daemon.
-    let scenario = building_scenario(&building, final_world.clone())?;
+    let scenario = building.scenario(final_world.clone())?;
     let mut query_times = Vec::new();
     for seed in 1..=5u64 {
         let request = RendezvousRequest { seed, params: scenario.params, ..RendezvousRequest::new(1, scenario.belief) };

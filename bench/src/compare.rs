@@ -1,0 +1,596 @@
+//! Two builds of `dyfos`, same run: `dyfos-bench compare --baseline DIR`.
+//!
+//! A speed-up is only worth what it is measured against, and on a shared machine
+//! two runs minutes apart disagree by more than most changes gain. So both builds'
+//! `dyfos solve` run here, interleaved (baseline, new, baseline, new, … per query
+//! and round), on the same scenario files with the same seeds and threads; each
+//! run's `micros` (the search's wall time, as the answer reports it) and answer
+//! (x, cost bits, evaluation counts) are read back. Per group (algorithm × map
+//! kind × model) the medians, their ratio and whether every answer was identical
+//! are printed.
+//!
+//! The scenarios are written to a directory first ([`write_cases`]): the SPEC §10
+//! maps, hard maps, the repository's real OctoMap scenario, a synthetic OctoMap
+//! building (as `dyfos-bench octomap` builds it) and cylinder maps as voxel grids,
+//! each scored with the models asked for.
+//!
+//! [`evaluation_floor`] is the other yardstick: the cost of one evaluation of a
+//! feasible candidate on an empty map in a tight loop, in this process. A query's
+//! time over (evaluations × floor) says how much of it is the search around the
+//! pipeline rather than the pipeline itself.
+
+use crate::numerical::{NumericalConfig, numerical_map, numerical_maps, voxelized};
+use crate::octomap::{Building, RESOLUTION};
+use crate::stats::quantile_sorted;
+use anyhow::{Context, bail};
+use dyfos_shared::answer::{Algorithm, EvalStats};
+use dyfos_shared::scenario::Scenario;
+use dyfos_shared::world::World;
+use dyfos_shared::world::octomap::write_bt;
+use std::fmt::Write;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// What kind of map a scenario holds (a column of the comparison).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MapKind {
+    /// SPEC §10's random maps: 25 cylinders on [−10, 10]².
+    Numerical,
+    /// Cluttered maps: the golden `hard_*` scenarios (cylinders, boxes, a floating
+    /// box, low sun), then SPEC §10 maps with three times the cylinders.
+    Hard,
+    /// The repository's real OctoMap scenarios (`tests/data/octomap`).
+    Octomap,
+    /// A synthetic building written as an OctoMap `.bt` and read back.
+    Building,
+    /// SPEC §10 maps as 0.1 m occupancy grids: cylinders of the same clutter as voxels.
+    Voxels,
+}
+
+impl MapKind {
+    /// Every kind, in table order.
+    pub const ALL: [MapKind; 5] =
+        [MapKind::Numerical, MapKind::Hard, MapKind::Octomap, MapKind::Building, MapKind::Voxels];
+
+    /// The name used in flags and tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            MapKind::Numerical => "numerical",
+            MapKind::Hard => "hard",
+            MapKind::Octomap => "octomap",
+            MapKind::Building => "building",
+            MapKind::Voxels => "voxels",
+        }
+    }
+
+    /// The kind named `s`.
+    pub fn from_name(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == s)
+    }
+}
+
+/// The SDSMM a scenario is scored with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Model {
+    /// `paper`, written into the scenario.
+    Paper,
+    /// `anisotropic`, written into the scenario.
+    Anisotropic,
+    /// `learned`: the scenario plus `dyfos solve --model FILE`.
+    Learned,
+}
+
+impl Model {
+    /// The name used in flags and tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Paper => "paper",
+            Model::Anisotropic => "anisotropic",
+            Model::Learned => "learned",
+        }
+    }
+
+    /// The model named `s`.
+    pub fn from_name(s: &str) -> Option<Self> {
+        [Model::Paper, Model::Anisotropic, Model::Learned].into_iter().find(|m| m.name() == s)
+    }
+}
+
+/// Which scenarios to write and how to run them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompareConfig {
+    /// Map kinds to include.
+    pub kinds: Vec<MapKind>,
+    /// Models to score every map with.
+    pub models: Vec<Model>,
+    /// Algorithms to run (`dyfos`, `brute`, …).
+    pub algorithms: Vec<Algorithm>,
+    /// Search seeds; every scenario runs once per seed and round.
+    pub seeds: Vec<u64>,
+    /// Interleaved rounds (baseline, new) per query.
+    pub rounds: usize,
+    /// `--threads` given to both builds' `dyfos solve` (only `brute` uses more than one).
+    pub threads: usize,
+    /// SPEC §10 maps (seed 1) of kind `numerical`; also the count of `voxels` and of
+    /// the dense `hard` maps is derived from it (see [`write_cases`]).
+    pub maps: usize,
+    /// Occupied cells of the synthetic building.
+    pub building_cells: u64,
+    /// The repository's `tests/data` (golden hard maps, OctoMap scenario, learned model).
+    pub data: PathBuf,
+}
+
+impl Default for CompareConfig {
+    fn default() -> Self {
+        CompareConfig {
+            kinds: MapKind::ALL.to_vec(),
+            models: vec![Model::Paper, Model::Learned],
+            algorithms: vec![Algorithm::Dyfos, Algorithm::Brute],
+            seeds: vec![1],
+            rounds: 3,
+            threads: 2,
+            maps: 20,
+            building_cells: 200_000,
+            data: PathBuf::from("tests/data"),
+        }
+    }
+}
+
+/// One scenario file with the model it is scored with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Case {
+    /// Map kind.
+    pub kind: MapKind,
+    /// Model.
+    pub model: Model,
+    /// Short name, e.g. `numerical_03`.
+    pub name: String,
+    /// The scenario file.
+    pub scenario: PathBuf,
+    /// `--model FILE` for `learned`.
+    pub model_file: Option<PathBuf>,
+}
+
+/// SPEC §10 maps of this seed are the `numerical` kind (as `dyfos-bench numerical` draws them).
+pub const MAP_SEED: u64 = 1;
+/// Cylinders of the dense `hard` maps, on the SPEC §10 square.
+pub const HARD_CYLINDERS: usize = 75;
+/// Golden hard scenarios under `tests/data`.
+const GOLDEN_HARD: [&str; 2] = ["golden/scenarios/hard/hard_00.json", "golden/scenarios/hard/hard_01.json"];
+/// Cell side of the `voxels` maps, m.
+const VOXEL_RESOLUTION: f64 = 0.1;
+
+fn read_scenario(path: &Path) -> anyhow::Result<Scenario> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    Scenario::from_json_with_files(&text, |f| std::fs::read(base.join(f)).map_err(|e| e.to_string()))
+        .with_context(|| format!("{} is not a valid scenario", path.display()))
+}
+
+/// The maps of each kind, as (name, scenario JSON, extra files to write beside it).
+fn maps_of(
+    kind: MapKind,
+    config: &CompareConfig,
+) -> anyhow::Result<Vec<(String, serde_json::Value, Vec<(String, Vec<u8>)>)>> {
+    let plain = |name: String, s: &Scenario| -> anyhow::Result<_> {
+        Ok((name, serde_json::from_str::<serde_json::Value>(&s.to_json())?, Vec::new()))
+    };
+    let mut out = Vec::new();
+    match kind {
+        MapKind::Numerical => {
+            for (i, s) in numerical_maps(MAP_SEED, config.maps, &NumericalConfig::paper()).iter().enumerate() {
+                out.push(plain(format!("numerical_{i:02}"), s)?);
+            }
+        }
+        MapKind::Hard => {
+            // Half as many as the numerical maps: the golden ones, then dense cylinder maps.
+            let count = config.maps.div_ceil(2);
+            for (i, file) in GOLDEN_HARD.iter().take(count).enumerate() {
+                out.push(plain(format!("hard_{i:02}"), &read_scenario(&config.data.join(file))?)?);
+            }
+            let dense = NumericalConfig { cylinders: HARD_CYLINDERS, ..NumericalConfig::paper() };
+            for i in GOLDEN_HARD.len()..count {
+                out.push(plain(format!("hard_{i:02}"), &numerical_map(MAP_SEED, i as u64, &dense))?);
+            }
+        }
+        MapKind::Octomap => {
+            let path = config.data.join("octomap/geb079-scenario.json");
+            let text = std::fs::read_to_string(&path).with_context(|| format!("cannot read {}", path.display()))?;
+            let mut json: serde_json::Value = serde_json::from_str(&text)?;
+            let bt = json["octomap"]["file"].as_str().context("the OctoMap scenario names no file")?.to_string();
+            let bytes = std::fs::read(path.with_file_name(&bt)).with_context(|| format!("cannot read {bt}"))?;
+            json["octomap"]["file"] = "geb079.bt".into();
+            out.push(("geb079".to_string(), json, vec![("geb079.bt".to_string(), bytes)]));
+        }
+        MapKind::Building => {
+            let building = Building::with_cells(config.building_cells);
+            let world = World::new(0, building.bounds()?, Building::sun(), [], None)?;
+            let scenario = building.scenario(world)?;
+            let mut json: serde_json::Value = serde_json::from_str(&scenario.to_json())?;
+            json["octomap"] = serde_json::json!({"file": "building.bt", "origin": [0.0, 0.0, 0.0]});
+            out.push((
+                "building".to_string(),
+                json,
+                vec![("building.bt".into(), write_bt(RESOLUTION, building.cells())?)],
+            ));
+        }
+        MapKind::Voxels => {
+            let count = config.maps.div_ceil(4);
+            for (i, s) in numerical_maps(MAP_SEED, count, &NumericalConfig::paper()).iter().enumerate() {
+                out.push(plain(format!("voxels_{i:02}"), &voxelized(s, VOXEL_RESOLUTION)?)?);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Writes the scenario files of `config` into `dir` (created): one file per map
+/// and model. Counts: `maps` numerical maps (seed [`MAP_SEED`]); ⌈maps/2⌉ hard ones
+/// (the golden `hard_*`, then [`HARD_CYLINDERS`]-cylinder maps); ⌈maps/4⌉ voxel
+/// maps; one real OctoMap scenario; one building.
+pub fn write_cases(config: &CompareConfig, dir: &Path) -> anyhow::Result<Vec<Case>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let learned = config.data.join("learned/model.bin");
+    if config.models.contains(&Model::Learned) && !learned.exists() {
+        bail!("model `learned` needs {}: run from the repository root or give --data", learned.display());
+    }
+    let mut cases = Vec::new();
+    for &kind in &config.kinds {
+        for (name, json, files) in maps_of(kind, config)? {
+            for (file, bytes) in &files {
+                std::fs::write(dir.join(file), bytes).with_context(|| format!("cannot write {file}"))?;
+            }
+            for &model in &config.models {
+                let mut json = json.clone();
+                // `learned` is chosen by the model file; the scenario names a valid model.
+                let written = if model == Model::Anisotropic { "anisotropic" } else { "paper" };
+                json["params"]["model"] = written.into();
+                let scenario = dir.join(format!("{name}-{}.json", model.name()));
+                std::fs::write(&scenario, serde_json::to_string_pretty(&json)?)?;
+                let model_file = (model == Model::Learned).then(|| learned.clone());
+                cases.push(Case { kind, model, name: name.clone(), scenario, model_file });
+            }
+        }
+    }
+    Ok(cases)
+}
+
+/// What must be identical between the builds: x and cost as bits, and the counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct AnswerBits {
+    /// `x` as IEEE 754 bits; `None` when no feasible pose was found (exit code 3).
+    pub x: Option<[u64; 4]>,
+    /// The cost's bits.
+    pub cost: Option<u64>,
+    /// Candidates evaluated, by rejection (zero when infeasible: not printed).
+    pub evaluations: EvalStats,
+}
+
+/// One `dyfos solve` run.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SolveRun {
+    /// The answer's `micros` (NaN when no feasible pose was found).
+    pub micros: f64,
+    /// The answer.
+    pub answer: AnswerBits,
+}
+
+/// The `dyfos` binary in `dir`, or an error saying what is missing.
+pub fn dyfos_in(dir: &Path) -> anyhow::Result<PathBuf> {
+    let path = dir.join(format!("dyfos{}", std::env::consts::EXE_SUFFIX));
+    if !path.is_file() {
+        bail!(
+            "{} has no `dyfos` binary: give the directory a build puts its binaries in (e.g. target/release)",
+            dir.display()
+        );
+    }
+    Ok(path)
+}
+
+/// Runs `dyfos solve` of `dyfos` on `case` and reads its answer.
+pub fn solve_once(
+    dyfos: &Path,
+    case: &Case,
+    algorithm: Algorithm,
+    seed: u64,
+    threads: usize,
+) -> anyhow::Result<SolveRun> {
+    let mut cmd = Command::new(dyfos);
+    cmd.arg("solve").arg(&case.scenario).args(["--algo", algorithm.name()]);
+    cmd.args(["--seed", &seed.to_string(), "--threads", &threads.to_string()]);
+    if let Some(f) = &case.model_file {
+        cmd.arg("--model").arg(f);
+    }
+    let out = cmd.output().with_context(|| format!("cannot run {}", dyfos.display()))?;
+    let what = || format!("{} solve {} --algo {}", dyfos.display(), case.scenario.display(), algorithm.name());
+    match out.status.code() {
+        Some(0) => {}
+        // No feasible pose: an answer too, to be compared.
+        Some(3) => {
+            return Ok(SolveRun {
+                micros: f64::NAN,
+                answer: AnswerBits { x: None, cost: None, evaluations: EvalStats::default() },
+            });
+        }
+        _ => bail!("{} failed ({}): {}", what(), out.status, String::from_utf8_lossy(&out.stderr).trim()),
+    }
+    let json: serde_json::Value =
+        serde_json::from_slice(&out.stdout).with_context(|| format!("{} printed no JSON answer", what()))?;
+    let number = |v: &serde_json::Value| v.as_f64().with_context(|| format!("{}: `{v}` is not a number", what()));
+    let xs = json["x"].as_array().filter(|a| a.len() == 4).with_context(|| format!("{}: no `x`", what()))?;
+    let mut x = [0u64; 4];
+    for (bits, v) in x.iter_mut().zip(xs) {
+        *bits = number(v)?.to_bits();
+    }
+    let evaluations: EvalStats =
+        serde_json::from_value(json["evaluations"].clone()).with_context(|| format!("{}: no `evaluations`", what()))?;
+    Ok(SolveRun {
+        micros: number(&json["micros"])?,
+        answer: AnswerBits { x: Some(x), cost: Some(number(&json["cost"])?.to_bits()), evaluations },
+    })
+}
+
+/// Both builds' runs of one query (case, algorithm, seed).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct QueryRuns {
+    /// Scenario name.
+    pub name: String,
+    /// Map kind.
+    pub kind: MapKind,
+    /// Model.
+    pub model: Model,
+    /// Algorithm name.
+    pub algorithm: String,
+    /// Search seed.
+    pub seed: u64,
+    /// The baseline's runs, one per round.
+    pub baseline: Vec<SolveRun>,
+    /// This build's runs, one per round.
+    pub new: Vec<SolveRun>,
+}
+
+impl QueryRuns {
+    /// Whether every run of both builds gave the same answer.
+    pub fn identical(&self) -> bool {
+        let first = self.baseline.first().map(|r| r.answer);
+        self.baseline.iter().chain(&self.new).all(|r| Some(r.answer) == first)
+    }
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    if values.is_empty() { f64::NAN } else { quantile_sorted(values, 0.5) }
+}
+
+fn median_micros(runs: &[SolveRun]) -> f64 {
+    median(&mut runs.iter().map(|r| r.micros).filter(|m| !m.is_nan()).collect::<Vec<_>>())
+}
+
+/// One line of the table: a group of queries (algorithm × kind × model).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct GroupRow {
+    /// Algorithm name.
+    pub algorithm: String,
+    /// Map kind.
+    pub kind: MapKind,
+    /// Model.
+    pub model: Model,
+    /// Queries (scenarios × seeds).
+    pub queries: usize,
+    /// Median over the queries of each query's median baseline `micros`.
+    pub baseline_micros: f64,
+    /// The same for this build.
+    pub new_micros: f64,
+    /// `baseline_micros / new_micros`: > 1 is faster.
+    pub ratio: f64,
+    /// Median over the queries of the per-query ratio (baseline median / new median).
+    pub median_query_ratio: f64,
+    /// Whether every answer of both builds was identical (x, cost bits, counts).
+    pub identical: bool,
+    /// Queries whose answers differed.
+    pub differing: usize,
+    /// Median evaluations of this build's answers.
+    pub evaluations: f64,
+    /// Median over the queries of new `micros` / (evaluations × floor), when the
+    /// floor was measured (see [`evaluation_floor`]).
+    pub new_floor_multiple: Option<f64>,
+    /// The same for the baseline's `micros` against this build's floor.
+    pub baseline_floor_multiple: Option<f64>,
+}
+
+/// The whole comparison.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Comparison {
+    /// The baseline's binary directory.
+    pub baseline: PathBuf,
+    /// This build's binary directory.
+    pub new: PathBuf,
+    /// Rounds run.
+    pub rounds: usize,
+    /// Threads given to `dyfos solve`.
+    pub threads: usize,
+    /// The evaluation floor per model, µs, when measured.
+    pub floors: Vec<(Model, f64)>,
+    /// One line per group.
+    pub groups: Vec<GroupRow>,
+    /// Every query's runs.
+    pub queries: Vec<QueryRuns>,
+}
+
+/// Runs every case × algorithm × seed on both builds, interleaved per round
+/// (baseline then new, for every query, then the next round), and groups the
+/// results. `floors` (µs per model) adds the floor multiples.
+pub fn compare(
+    config: &CompareConfig,
+    cases: &[Case],
+    baseline_dir: &Path,
+    new_dir: &Path,
+    floors: &[(Model, f64)],
+    mut progress: impl FnMut(&str),
+) -> anyhow::Result<Comparison> {
+    let (a, b) = (dyfos_in(baseline_dir)?, dyfos_in(new_dir)?);
+    let mut queries = Vec::new();
+    for case in cases {
+        for &algorithm in &config.algorithms {
+            for &seed in &config.seeds {
+                queries.push((
+                    case,
+                    algorithm,
+                    QueryRuns {
+                        name: case.name.clone(),
+                        kind: case.kind,
+                        model: case.model,
+                        algorithm: algorithm.name().to_string(),
+                        seed,
+                        baseline: Vec::new(),
+                        new: Vec::new(),
+                    },
+                ));
+            }
+        }
+    }
+    for round in 0..config.rounds.max(1) {
+        progress(&format!("round {}/{}: {} queries on each build", round + 1, config.rounds.max(1), queries.len()));
+        for (case, algorithm, runs) in &mut queries {
+            runs.baseline.push(solve_once(&a, case, *algorithm, runs.seed, config.threads)?);
+            runs.new.push(solve_once(&b, case, *algorithm, runs.seed, config.threads)?);
+        }
+    }
+    let queries: Vec<QueryRuns> = queries.into_iter().map(|(_, _, q)| q).collect();
+    let mut keys: Vec<(String, MapKind, Model)> =
+        queries.iter().map(|q| (q.algorithm.clone(), q.kind, q.model)).collect();
+    keys.sort();
+    keys.dedup();
+    let groups = keys
+        .into_iter()
+        .map(|(algorithm, kind, model)| {
+            let members: Vec<&QueryRuns> =
+                queries.iter().filter(|q| q.algorithm == algorithm && q.kind == kind && q.model == model).collect();
+            group_row(&algorithm, kind, model, &members, floors.iter().find(|f| f.0 == model).map(|f| f.1))
+        })
+        .collect();
+    Ok(Comparison {
+        baseline: baseline_dir.to_path_buf(),
+        new: new_dir.to_path_buf(),
+        rounds: config.rounds.max(1),
+        threads: config.threads,
+        floors: floors.to_vec(),
+        groups,
+        queries,
+    })
+}
+
+fn group_row(algorithm: &str, kind: MapKind, model: Model, members: &[&QueryRuns], floor: Option<f64>) -> GroupRow {
+    let base: Vec<f64> = members.iter().map(|q| median_micros(&q.baseline)).collect();
+    let new: Vec<f64> = members.iter().map(|q| median_micros(&q.new)).collect();
+    let evaluations: Vec<f64> =
+        members.iter().map(|q| q.new.first().map_or(f64::NAN, |r| r.answer.evaluations.total as f64)).collect();
+    let finite = |v: Vec<f64>| -> Vec<f64> { v.into_iter().filter(|x| x.is_finite()).collect() };
+    let ratios = finite(base.iter().zip(&new).map(|(b, n)| b / n).collect());
+    let multiple = |micros: &[f64]| {
+        floor.map(|f| median(&mut finite(micros.iter().zip(&evaluations).map(|(m, e)| m / (e * f)).collect())))
+    };
+    let differing = members.iter().filter(|q| !q.identical()).count();
+    let (b, n) = (median(&mut finite(base.clone())), median(&mut finite(new.clone())));
+    GroupRow {
+        algorithm: algorithm.to_string(),
+        kind,
+        model,
+        queries: members.len(),
+        baseline_micros: b,
+        new_micros: n,
+        ratio: b / n,
+        median_query_ratio: median(&mut ratios.clone()),
+        identical: differing == 0,
+        differing,
+        evaluations: median(&mut finite(evaluations.clone())),
+        new_floor_multiple: multiple(&new),
+        baseline_floor_multiple: multiple(&base),
+    }
+}
+
+impl Comparison {
+    /// The table: one line per group, then the overall verdict on answers.
+    pub fn table(&self) -> String {
+        let mut out = String::new();
+        for (model, floor) in &self.floors {
+            let _ = writeln!(out, "floor ({}): {floor:.4} µs per evaluation of a feasible candidate", model.name());
+        }
+        let _ = writeln!(
+            out,
+            "\n| algorithm | maps | model | queries | baseline µs | new µs | ratio | median query ratio | evaluations | × floor (new / base) | answers |\n\
+             |---|---|---|---:|---:|---:|---:|---:|---:|---:|---|"
+        );
+        for g in &self.groups {
+            let floor = match (g.new_floor_multiple, g.baseline_floor_multiple) {
+                (Some(n), Some(b)) => format!("{n:.1} / {b:.1}"),
+                _ => "–".into(),
+            };
+            let answers = if g.identical { "identical".to_string() } else { format!("{} DIFFER", g.differing) };
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {} | {:.0} | {:.0} | {:.2} | {:.2} | {:.0} | {floor} | {answers} |",
+                g.algorithm,
+                g.kind.name(),
+                g.model.name(),
+                g.queries,
+                g.baseline_micros,
+                g.new_micros,
+                g.ratio,
+                g.median_query_ratio,
+                g.evaluations
+            );
+        }
+        let differing: usize = self.groups.iter().map(|g| g.differing).sum();
+        let _ = writeln!(
+            out,
+            "\n{} queries, {} rounds, --threads {}: {}",
+            self.queries.len(),
+            self.rounds,
+            self.threads,
+            if differing == 0 { "every answer identical".to_string() } else { format!("{differing} queries DIFFER") }
+        );
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(micros: f64, cost: f64) -> SolveRun {
+        let evaluations = EvalStats { total: 10, ..EvalStats::default() };
+        SolveRun { micros, answer: AnswerBits { x: Some([1, 2, 3, 4]), cost: Some(cost.to_bits()), evaluations } }
+    }
+
+    fn query(baseline: Vec<SolveRun>, new: Vec<SolveRun>) -> QueryRuns {
+        let (kind, model) = (MapKind::Numerical, Model::Paper);
+        QueryRuns { name: "m".into(), kind, model, algorithm: "dyfos".into(), seed: 1, baseline, new }
+    }
+
+    #[test]
+    fn one_differing_bit_is_a_differing_answer() {
+        let same = query(vec![run(200.0, -3.0)], vec![run(100.0, -3.0)]);
+        assert!(same.identical());
+        let next = f64::from_bits((-3.0f64).to_bits() + 1);
+        let differs = query(vec![run(200.0, -3.0)], vec![run(100.0, next)]);
+        assert!(!differs.identical());
+        let row = group_row("dyfos", MapKind::Numerical, Model::Paper, &[&same, &differs], Some(2.0));
+        assert_eq!((row.queries, row.differing, row.identical), (2, 1, false));
+        assert_eq!((row.baseline_micros, row.new_micros, row.ratio), (200.0, 100.0, 2.0));
+        // 100 µs over 10 evaluations × 2 µs.
+        assert_eq!(row.new_floor_multiple, Some(5.0));
+    }
+
+    #[test]
+    fn every_kind_and_model_has_a_name_it_is_read_back_from() {
+        for k in MapKind::ALL {
+            assert_eq!(MapKind::from_name(k.name()), Some(k));
+        }
+        for m in [Model::Paper, Model::Anisotropic, Model::Learned] {
+            assert_eq!(Model::from_name(m.name()), Some(m));
+        }
+    }
+}

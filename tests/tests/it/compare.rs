@@ -1,0 +1,56 @@
+//! `dyfos-bench compare`: two builds' `dyfos solve` interleaved. Here the
+//! workspace's own build is its own baseline, so every answer must be identical.
+
+use dyfos_tests::{bin, bin_dir};
+use std::process::Command;
+
+#[test]
+fn a_build_against_itself_gives_identical_answers_and_a_ratio() {
+    let json = std::env::temp_dir().join(format!("dyfos-compare-test-{}.json", std::process::id()));
+    let out = Command::new(bin("dyfos-bench"))
+        .args(["compare", "--rounds", "1", "--count", "2", "--maps", "numerical", "--models", "paper"])
+        .args(["--algos", "dyfos", "--threads", "1"])
+        .arg("--baseline")
+        .arg(bin_dir())
+        .arg("--new")
+        .arg(bin_dir())
+        .arg("--data")
+        .arg(dyfos_tests::data(""))
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("dyfos-bench runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let row = stdout.lines().find(|l| l.starts_with("| dyfos | numerical | paper | 2 |")).expect("a group line");
+    assert!(row.ends_with("| identical |"), "{row}");
+    assert!(stdout.contains("2 queries, 1 rounds, --threads 1: every answer identical"), "{stdout}");
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let _ = std::fs::remove_file(&json);
+    let queries = report["queries"].as_array().unwrap();
+    assert_eq!(queries.len(), 2);
+    for q in queries {
+        let (base, new) = (&q["baseline"][0], &q["new"][0]);
+        assert_eq!(base["answer"], new["answer"]);
+        assert!(base["answer"]["evaluations"]["total"].as_u64().unwrap() > 0);
+        assert!(new["micros"].as_f64().unwrap() > 0.0);
+    }
+    let ratio = report["groups"][0]["ratio"].as_f64().unwrap();
+    assert!(ratio.is_finite() && ratio > 0.0, "{ratio}");
+}
+
+#[test]
+fn a_baseline_without_dyfos_is_a_clear_error() {
+    let empty = std::env::temp_dir().join(format!("dyfos-compare-empty-{}", std::process::id()));
+    std::fs::create_dir_all(&empty).unwrap();
+    let out = Command::new(bin("dyfos-bench"))
+        .args(["compare", "--rounds", "1", "--count", "1", "--maps", "numerical", "--models", "paper"])
+        .arg("--baseline")
+        .arg(&empty)
+        .output()
+        .expect("dyfos-bench runs");
+    let _ = std::fs::remove_dir(&empty);
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("has no `dyfos` binary"), "{stderr}");
+}
