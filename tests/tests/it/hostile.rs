@@ -172,6 +172,34 @@ fn set_float(h: &mut RendezvousRequestHeader, field: usize, v: f64) {
     }
 }
 
+/// Which chunk of which upload [`upload_chunk`] sends.
+struct UploadChunk {
+    map: MapId,
+    upload_id: u64,
+    index: u32,
+    count: u32,
+    replace: bool,
+}
+
+/// The header of an upload chunk with no deltas of its own (the records go with
+/// it), bounds `bounds` and a low sun, as request `request_id`.
+fn upload_chunk(c: UploadChunk, bounds: Bounds, request_id: u64) -> MapRequestHeader {
+    let sun = Sun::new(0.1, 0.0).unwrap();
+    let UploadChunk { map, upload_id, index, count, replace } = c;
+    MapRequest::Upload {
+        map,
+        upload_id,
+        chunk_index: index,
+        chunk_count: count,
+        replace,
+        expected_version: None,
+        bounds,
+        sun,
+        deltas: vec![],
+    }
+    .header(request_id, [0, 0])
+}
+
 /// A daemon with map 1 (the example scenario's world, which a well-formed client
 /// queries the whole time) and map 2 (two poles, which hostile requests target), a
 /// raw client, and a valid request to make hostile. [`Hostile::finish`] checks
@@ -419,18 +447,7 @@ fn huge_and_negative_counts_unknown_tags_and_disagreeing_counts_get_their_codes(
         r
     };
     let upload = |count: u32, index: u32| {
-        MapRequest::Upload {
-            map: 5,
-            upload_id: 77,
-            chunk_index: index,
-            chunk_count: count,
-            replace: false,
-            expected_version: None,
-            bounds,
-            sun: Sun::new(0.1, 0.0).unwrap(),
-            deltas: vec![],
-        }
-        .header(0, [0, 0])
+        upload_chunk(UploadChunk { map: 5, upload_id: 77, index, count, replace: false }, bounds, 0)
     };
     let rendezvous_cases: Vec<(&str, RendezvousRequestHeader, Vec<WireDelta>, Status)> = vec![
         ("run of -1", valid, run(-1, &[]), Status::MalformedDelta),
@@ -531,18 +548,7 @@ fn chunk_sequences_out_of_order_duplicated_or_never_finished_are_refused() {
     let (raw, bounds) = (&h.io.raw, h.bounds);
     // --- chunk sequences: out of order, duplicated, never finished -----------------
     let chunk = |upload_id: u64, map: MapId, index: u32, count: u32| {
-        let h = MapRequest::Upload {
-            map,
-            upload_id,
-            chunk_index: index,
-            chunk_count: count,
-            replace: true,
-            expected_version: None,
-            bounds,
-            sun: Sun::new(0.1, 0.0).unwrap(),
-            deltas: vec![],
-        }
-        .header(0, [0, 0]);
+        let h = upload_chunk(UploadChunk { map, upload_id, index, count, replace: true }, bounds, 0);
         status(raw.map(h, &encode_deltas(&[pole(index + 1, 1.0)])).0.status)
     };
     assert_eq!(chunk(40, 2, 1, 3), Status::ChunkOutOfOrder, "no chunk 0 yet");
@@ -577,18 +583,11 @@ fn an_upload_past_a_maps_limits_is_refused_before_it_completes() {
     let mut statuses = Vec::new();
     for index in 0..chunks {
         let deltas: Vec<MapDelta> = (0..per_chunk).map(|k| pole(index * per_chunk + k, 1.0)).collect();
-        let header = MapRequest::Upload {
-            map: 4,
-            upload_id: 1,
-            chunk_index: index,
-            chunk_count: chunks,
-            replace: false,
-            expected_version: None,
+        let header = upload_chunk(
+            UploadChunk { map: 4, upload_id: 1, index, count: chunks, replace: false },
             bounds,
-            sun: Sun::new(0.1, 0.0).unwrap(),
-            deltas: vec![],
-        }
-        .header(u64::from(index), [0, 0]);
+            u64::from(index),
+        );
         let (reply, _) = raw.map(header, &encode_deltas(&deltas));
         statuses.push(status(reply.status));
         if statuses.last() != Some(&Status::Ok) {
@@ -599,18 +598,11 @@ fn an_upload_past_a_maps_limits_is_refused_before_it_completes() {
     assert!(statuses[..refused].iter().all(|s| *s == Status::Ok), "{statuses:?}");
     assert_eq!(statuses.get(refused), Some(&Status::OverCapacity), "{statuses:?}");
     // The upload is abandoned: its next chunk is refused and no map appeared.
-    let next = MapRequest::Upload {
-        map: 4,
-        upload_id: 1,
-        chunk_index: refused as u32 + 1,
-        chunk_count: chunks,
-        replace: false,
-        expected_version: None,
+    let next = upload_chunk(
+        UploadChunk { map: 4, upload_id: 1, index: refused as u32 + 1, count: chunks, replace: false },
         bounds,
-        sun: Sun::new(0.1, 0.0).unwrap(),
-        deltas: vec![],
-    }
-    .header(99, [0, 0]);
+        99,
+    );
     assert_eq!(status(raw.map(next, &encode_deltas(&[pole(1, 1.0)])).0.status), Status::ChunkIncomplete);
     let err = sandbox.client().snapshot(4, PATIENCE).unwrap_err();
     assert_eq!(err.status(), Some(Status::UnknownMap));

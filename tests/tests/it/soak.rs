@@ -175,9 +175,31 @@ fn offline(world: &World, map: &SoakMap, sent: &dyfos_tests::soak::Sent) -> Resu
     dyfos_service::solve(world, &map.belief, &request.params, &model, request.algorithm, &control)
 }
 
-#[test]
-fn soak_with_chaos_loses_nothing_and_answers_every_request() {
-    let cfg = Config::from_env();
+/// Everything a soak run leaves to check: the processes' logs, what the daemon's
+/// incarnations looked like, and the maps before and after a clean restart.
+struct Soak {
+    cfg: Config,
+    run: PathBuf,
+    maps: Vec<SoakMap>,
+    writer_log: Vec<WriterRecord>,
+    /// Each query process's id, log, and whether it was killed.
+    client_logs: Vec<(u32, PathBuf, bool)>,
+    /// Each query process that was stopped, and how it exited.
+    exits: Vec<(u32, std::process::ExitStatus)>,
+    incarnations: Vec<Incarnation>,
+    faults: Faults,
+    shm_samples: Vec<(f64, usize)>,
+    /// Every map at the end of the run, and again after a SIGTERM and a restart.
+    snapshots: Vec<World>,
+    after_restart: Vec<World>,
+    shm_left: Vec<String>,
+    state_left: Vec<String>,
+    load_at_start: String,
+    load_at_end: String,
+}
+
+/// Runs the soak: the processes, the chaos, a clean stop, one more restart.
+fn soak(cfg: Config) -> Soak {
     let sandbox = Sandbox::new("soak");
     let run = std::env::temp_dir().join(format!("dyfos-soak-{}-{}", std::process::id(), sandbox.domain));
     let _ = std::fs::remove_dir_all(&run);
@@ -264,79 +286,111 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
         }
     }
 
-    // Stop every process; each finishes its request in flight and exits 0.
+    // Stop every process; each finishes its request in flight and exits.
     std::fs::write(run.join("stop"), b"").unwrap();
     let mut procs: Vec<Proc> = live;
     procs.push(writer);
-    for p in &mut procs {
-        let status = wait_for("a soak process to stop", || p.child.try_wait());
-        assert!(status.success(), "soak-client {} exited with {status}", p.id);
-    }
+    let exits: Vec<(u32, std::process::ExitStatus)> =
+        procs.iter_mut().map(|p| (p.id, wait_for("a soak process to stop", || p.child.try_wait()))).collect();
     let inc = incarnations.last_mut().expect("one incarnation");
     inc.stats = admin.stats(PATIENCE).ok();
     inc.ended_by = "end";
     let snapshots: Vec<World> = maps.iter().map(|m| admin.snapshot(m.id, PATIENCE).unwrap()).collect();
     let load_at_end = load_average();
-
-    let mut failures: Vec<String> = Vec::new();
-
-    // --- the writer: no delta lost or applied twice --------------------------
     let writer_log: Vec<WriterRecord> = read_log(&procs.last().expect("writer").log);
-    let mut applied: Vec<(u64, u64, Vec<MapDelta>)> = Vec::new();
-    let (mut ack_lost, mut inline, mut rejected_invalid, mut retries) = (0u64, 0u64, 0u64, 0u64);
-    let mut version = 0;
-    for r in &writer_log {
+    let mut client_logs: Vec<(u32, PathBuf, bool)> = killed.iter().map(|(id, log)| (*id, log.clone(), true)).collect();
+    client_logs.extend(procs[..procs.len() - 1].iter().map(|p| (p.id, p.log.clone(), false)));
+
+    // A clean stop, and the maps again from disk.
+    drop(admin);
+    let status = daemon.terminate();
+    assert!(status.success(), "final SIGTERM: {status}\n{}", daemon.log());
+    let mut daemon = sandbox.start_daemon(&[]);
+    let after_restart = {
+        let mut admin = sandbox.client();
+        maps.iter().map(|m| admin.snapshot(m.id, PATIENCE).unwrap()).collect()
+    };
+    assert!(daemon.terminate().success());
+    Soak {
+        shm_left: sandbox.shm_leftovers(),
+        state_left: sandbox.state_leftovers(),
+        cfg,
+        run,
+        maps,
+        writer_log,
+        client_logs,
+        exits,
+        incarnations,
+        faults,
+        shm_samples,
+        snapshots,
+        after_restart,
+        load_at_start,
+        load_at_end,
+    }
+}
+
+/// The writer's log read back: the batches the daemon acknowledged, and what went
+/// wrong on the way.
+#[derive(Default)]
+struct WriterLog {
+    applied: Vec<(u64, u64, Vec<MapDelta>)>,
+    version: u64,
+    ack_lost: u64,
+    inline: u64,
+    rejected_invalid: u64,
+    retries: u64,
+    failures: Vec<String>,
+}
+
+fn writer_log(log: &[WriterRecord]) -> WriterLog {
+    let mut w = WriterLog::default();
+    for r in log {
         match r {
-            WriterRecord::Applied { k, from, to, deltas, inline: i, ack_lost: lost, .. } => {
-                if *from != version || *to != from + deltas.len() as u64 || deltas.is_empty() {
-                    failures.push(format!("writer batch {k}: {from} -> {to} after version {version}"));
+            WriterRecord::Applied { k, from, to, deltas, inline, ack_lost, .. } => {
+                if *from != w.version || *to != from + deltas.len() as u64 || deltas.is_empty() {
+                    w.failures.push(format!("writer batch {k}: {from} -> {to} after version {}", w.version));
                 }
-                version = *to;
-                ack_lost += u64::from(*lost);
-                inline += u64::from(*i);
-                applied.push((*from, *to, deltas.clone()));
+                w.version = *to;
+                w.ack_lost += u64::from(*ack_lost);
+                w.inline += u64::from(*inline);
+                w.applied.push((*from, *to, deltas.clone()));
             }
             WriterRecord::Rejected { k, from, status, valid } => {
-                if *valid || status != "invalid_delta" || *from != version {
-                    failures.push(format!("writer batch {k} (valid: {valid}) at {from} rejected: {status}"));
+                if *valid || status != "invalid_delta" || *from != w.version {
+                    w.failures.push(format!("writer batch {k} (valid: {valid}) at {from} rejected: {status}"));
                 }
-                rejected_invalid += 1;
+                w.rejected_invalid += 1;
             }
             WriterRecord::Retry { k, outcome } => {
-                retries += 1;
+                w.retries += 1;
                 if matches!(outcome, Outcome::Failed { kind, .. } if kind == "timeout" || kind == "ipc") {
-                    failures.push(format!("writer batch {k}: {outcome:?}"));
+                    w.failures.push(format!("writer batch {k}: {outcome:?}"));
                 }
             }
-            WriterRecord::Fatal { k, message } => failures.push(format!("writer batch {k}: {message}")),
+            WriterRecord::Fatal { k, message } => w.failures.push(format!("writer batch {k}: {message}")),
         }
     }
-    let replayed = applied
-        .iter()
-        .try_fold(maps[0].world.clone(), |w, (_, _, d)| w.apply(d))
-        .expect("the acknowledged batches replay");
-    if replayed != snapshots[0] {
-        failures.push(format!(
-            "the writer map (version {}) differs from the replay of its acknowledged deltas (version {})",
-            snapshots[0].version(),
-            replayed.version()
-        ));
-    }
-    for (m, s) in maps[1..].iter().zip(&snapshots[1..]) {
-        if *s != m.world {
-            failures.push(format!("fixed map {} changed", m.id));
-        }
-    }
-    let boundaries: BTreeSet<u64> = std::iter::once(0).chain(applied.iter().map(|a| a.1)).collect();
+    w
+}
 
-    // --- the clients: an answer or a specific error for every request --------
-    let mut logs: Vec<(u32, PathBuf, bool)> = killed.iter().map(|(id, log)| (*id, log.clone(), true)).collect();
-    logs.extend(procs[..procs.len() - 1].iter().map(|p| (p.id, p.log.clone(), false)));
-    let mut counts: BTreeMap<String, u64> = BTreeMap::new();
-    let mut latencies: Vec<u64> = Vec::new();
-    let mut to_verify: Vec<(dyfos_tests::soak::Sent, Option<(serde_json::Value, u64)>)> = Vec::new();
-    let mut sent_total = 0u64;
-    for (id, log, was_killed) in &logs {
+/// The query processes' logs read back: every outcome counted and checked against
+/// its request, and the answers to re-solve offline.
+#[derive(Default)]
+struct ClientLogs {
+    sent: u64,
+    counts: BTreeMap<String, u64>,
+    latencies: Vec<u64>,
+    to_verify: Vec<(dyfos_tests::soak::Sent, Option<(serde_json::Value, u64)>)>,
+    failures: Vec<String>,
+}
+
+/// Reads every query log; `boundaries` are the writer map's versions between
+/// acknowledged batches (the only ones a query may see).
+fn client_logs(logs: &[(u32, PathBuf, bool)], boundaries: &BTreeSet<u64>) -> ClientLogs {
+    let mut c = ClientLogs::default();
+    let failures = &mut c.failures;
+    for (id, log, was_killed) in logs {
         let mut pending: Option<dyfos_tests::soak::Sent> = None;
         let mut last_writer_version = 0;
         for record in read_log::<Record>(log) {
@@ -345,7 +399,7 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
                     if let Some(p) = &pending {
                         failures.push(format!("client {id}: request {} got no outcome", p.n));
                     }
-                    sent_total += 1;
+                    c.sent += 1;
                     pending = Some(s);
                 }
                 Record::Done { n, micros, outcome } => {
@@ -356,7 +410,7 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
                     let mut version_seen = None;
                     let key = match &outcome {
                         Outcome::Answer { answer, map_version, stop } => {
-                            latencies.push(micros);
+                            c.latencies.push(micros);
                             version_seen = Some(*map_version);
                             if s.check || answer["algorithm"] != s.algorithm.name() {
                                 failures.push(format!("client {id} #{n}: answer {answer} to {s:?}"));
@@ -365,7 +419,7 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
                                 failures.push(format!("client {id} #{n}: stopped by a deadline it did not set"));
                             }
                             if *stop != StopReason::Deadline {
-                                to_verify.push((s.clone(), Some((answer.clone(), *map_version))));
+                                c.to_verify.push((s.clone(), Some((answer.clone(), *map_version))));
                             }
                             "ok".to_string()
                         }
@@ -392,7 +446,7 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
                                 failures.push(format!("client {id} #{n}: {status}: {message} for {s:?}"));
                             }
                             if status == "no_feasible_pose" && s.map != WRITER_MAP {
-                                to_verify.push((s.clone(), None));
+                                c.to_verify.push((s.clone(), None));
                             }
                             status.clone()
                         }
@@ -403,7 +457,7 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
                             format!("client:{kind}")
                         }
                     };
-                    *counts.entry(key).or_default() += 1;
+                    *c.counts.entry(key).or_default() += 1;
                     if let Some(v) = version_seen {
                         if s.expected_version.is_some_and(|e| e != v) {
                             failures.push(format!("client {id} #{n}: answered at version {v} for {s:?}"));
@@ -427,20 +481,41 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
             failures.push(format!("client {id}: its last request got no outcome"));
         }
     }
+    c
+}
 
-    // --- spot checks against the offline library -----------------------------
-    let step = (to_verify.len() / cfg.verify.max(1)).max(1);
-    let sample: Vec<_> = to_verify.iter().step_by(step).take(cfg.verify.max(1)).collect();
+/// What the cases read: the run, and its logs read back once.
+struct Checked {
+    soak: Soak,
+    writer: WriterLog,
+    clients: ClientLogs,
+    /// Answers re-solved offline, and the mismatches.
+    verified: usize,
+    offline_failures: Vec<String>,
+    rss_max: u64,
+    shm_settled: usize,
+    shm_max: usize,
+}
+
+fn check(soak: Soak) -> Checked {
+    let writer = writer_log(&soak.writer_log);
+    let boundaries: BTreeSet<u64> = std::iter::once(0).chain(writer.applied.iter().map(|a| a.1)).collect();
+    let clients = client_logs(&soak.client_logs, &boundaries);
+
+    // Spot checks against the offline library.
+    let (maps, verify) = (&soak.maps, soak.cfg.verify.max(1));
+    let step = (clients.to_verify.len() / verify).max(1);
+    let sample: Vec<_> = clients.to_verify.iter().step_by(step).take(verify).collect();
     let wanted: BTreeSet<u64> =
         sample.iter().filter(|(s, _)| s.map == WRITER_MAP).filter_map(|(_, a)| a.as_ref().map(|a| a.1)).collect();
-    let worlds = writer_worlds(&maps[0].world, &applied, &wanted);
-    let mut verified = 0;
+    let worlds = writer_worlds(&maps[0].world, &writer.applied, &wanted);
+    let (mut verified, mut offline_failures) = (0, Vec::new());
     for (s, got) in &sample {
         let map = maps.iter().find(|m| m.id == s.map).expect("a soak map");
         let world = match got {
             Some((_, v)) if s.map == WRITER_MAP => match worlds.get(v) {
                 Some(w) => w,
-                None => continue, // reported above as a version that never existed
+                None => continue, // a version that never existed: the clients' case says so
             },
             _ => &map.world,
         };
@@ -448,99 +523,159 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
             (Some((answer, _)), Ok(expected)) => {
                 let expected = without_micros(expected.to_json());
                 if without_micros(answer.clone()) != expected {
-                    failures.push(format!("{s:?}: daemon {answer} != offline {expected}"));
+                    offline_failures.push(format!("{s:?}: daemon {answer} != offline {expected}"));
                 }
             }
             (None, Err(_)) => {}
-            (got, expected) => failures.push(format!("{s:?}: daemon {got:?} vs offline {expected:?}")),
+            (got, expected) => offline_failures.push(format!("{s:?}: daemon {got:?} vs offline {expected:?}")),
         }
         verified += 1;
     }
 
-    // --- resources ------------------------------------------------------------
-    let rss_max = incarnations.iter().flat_map(|i| i.rss_kib.iter().copied()).max().unwrap_or(0);
-    if rss_max > 512 * 1024 {
-        failures.push(format!("dyfosd RSS reached {rss_max} KiB"));
-    }
-    for inc in &incarnations {
-        let (s, e) = inc.rss_start_end();
-        if inc.rss_kib.len() >= 25 && e > 2 * s + 32 * 1024 {
-            failures.push(format!("dyfosd {} grew from {s} KiB to {e} KiB", inc.pid));
-        }
-    }
+    let rss_max = soak.incarnations.iter().flat_map(|i| i.rss_kib.iter().copied()).max().unwrap_or(0);
     // Segments once every process is up: the most seen in the run's first third
     // (before the second daemon fault). Growth past that means leaked segments.
-    let third = cfg.secs as f64 / 3.0;
-    let settle = shm_samples.iter().filter(|(t, _)| *t < third).map(|(_, n)| *n).max().unwrap_or(0);
-    let shm_max = shm_samples.iter().map(|(_, n)| *n).max().unwrap_or(0);
-    if shm_max > 3 * settle + 32 {
-        failures.push(format!("shared-memory segments grew from {settle} to {shm_max}"));
-    }
+    let third = soak.cfg.secs as f64 / 3.0;
+    let shm_settled = soak.shm_samples.iter().filter(|(t, _)| *t < third).map(|(_, n)| *n).max().unwrap_or(0);
+    let shm_max = soak.shm_samples.iter().map(|(_, n)| *n).max().unwrap_or(0);
+    Checked { soak, writer, clients, verified, offline_failures, rss_max, shm_settled, shm_max }
+}
 
-    // --- a clean stop leaves nothing; the maps survive another restart ---------
-    drop(admin);
-    let status = daemon.terminate();
-    assert!(status.success(), "final SIGTERM: {status}\n{}", daemon.log());
-    let daemon = sandbox.start_daemon(&[]);
-    {
-        let mut admin = sandbox.client();
-        for (m, before) in maps.iter().zip(&snapshots) {
-            assert_eq!(&admin.snapshot(m.id, PATIENCE).unwrap(), before, "map {} after the last restart", m.id);
+/// One property of a soak run: what is wrong, empty if it holds.
+type Case = fn(&Checked) -> Vec<String>;
+
+/// What a soak run must show, each named in its failure.
+const CASES: [(&str, Case); 9] = [
+    ("every process stopped cleanly", |c| {
+        c.soak
+            .exits
+            .iter()
+            .filter(|(_, s)| !s.success())
+            .map(|(id, s)| format!("soak-client {id} exited with {s}"))
+            .collect()
+    }),
+    ("the writer's batches were acknowledged in order", |c| c.writer.failures.clone()),
+    ("the writer's map is the replay of its acknowledged deltas (none lost, none twice)", |c| {
+        let replayed = c
+            .writer
+            .applied
+            .iter()
+            .try_fold(c.soak.maps[0].world.clone(), |w, (_, _, d)| w.apply(d))
+            .expect("the acknowledged batches replay");
+        let map = &c.soak.snapshots[0];
+        let mut failures = Vec::new();
+        if replayed != *map {
+            failures.push(format!(
+                "version {} differs from the replay (version {})",
+                map.version(),
+                replayed.version()
+            ));
         }
-    }
-    let mut daemon = daemon;
-    assert!(daemon.terminate().success());
-    let shm_left = sandbox.shm_leftovers();
-    let state_left = sandbox.state_leftovers();
+        for (m, s) in c.soak.maps[1..].iter().zip(&c.soak.snapshots[1..]) {
+            if *s != m.world {
+                failures.push(format!("fixed map {} changed", m.id));
+            }
+        }
+        failures
+    }),
+    ("every request got an answer or a specific error", |c| c.clients.failures.clone()),
+    ("answers equal the offline library's", |c| c.offline_failures.clone()),
+    ("the daemon's memory and shared memory stayed bounded", |c| {
+        let mut failures = Vec::new();
+        if c.rss_max > 512 * 1024 {
+            failures.push(format!("dyfosd RSS reached {} KiB", c.rss_max));
+        }
+        for inc in &c.soak.incarnations {
+            let (s, e) = inc.rss_start_end();
+            if inc.rss_kib.len() >= 25 && e > 2 * s + 32 * 1024 {
+                failures.push(format!("dyfosd {} grew from {s} KiB to {e} KiB", inc.pid));
+            }
+        }
+        if c.shm_max > 3 * c.shm_settled + 32 {
+            failures.push(format!("shared-memory segments grew from {} to {}", c.shm_settled, c.shm_max));
+        }
+        failures
+    }),
+    ("the maps survive a clean restart", |c| {
+        let maps = c.soak.maps.iter().zip(c.soak.snapshots.iter().zip(&c.soak.after_restart));
+        maps.filter(|(_, (before, after))| before != after).map(|(m, _)| format!("map {} differs", m.id)).collect()
+    }),
+    ("a clean stop leaves nothing behind", |c| {
+        let (shm, state) = (&c.soak.shm_left, &c.soak.state_left);
+        if shm.is_empty() && state.is_empty() { vec![] } else { vec![format!("left behind: {shm:?} {state:?}")] }
+    }),
+    ("the soak did what it claims", |c| {
+        let (f, answers) = (&c.soak.faults, c.clients.counts.get("ok").copied().unwrap_or(0));
+        let mut failures = Vec::new();
+        if !(f.client_kill9 >= 1 && f.daemon_kill9 >= 1 && f.daemon_sigterm >= 1) {
+            failures.push(format!("too few faults: {f:?}"));
+        }
+        if answers < 20 {
+            failures.push(format!("too few answers: {:?}", c.clients.counts));
+        }
+        if c.writer.applied.is_empty() || c.verified < 10 {
+            failures.push(format!("{} batches, {} answers verified", c.writer.applied.len(), c.verified));
+        }
+        failures
+    }),
+];
 
-    // --- the figures ----------------------------------------------------------
+fn percentiles(sorted: &[u64]) -> serde_json::Value {
+    serde_json::json!({
+        "answers": sorted.len(),
+        "p50": percentile(sorted, 0.5),
+        "p90": percentile(sorted, 0.9),
+        "p99": percentile(sorted, 0.99),
+        "max": sorted.last().copied().unwrap_or(0),
+    })
+}
+
+/// The figures of a run, printed and (with `DYFOS_SOAK_REPORT`) written.
+fn report(c: &Checked, failures: usize) -> serde_json::Value {
+    let (soak, w) = (&c.soak, &c.writer);
+    let mut latencies = c.clients.latencies.clone();
     latencies.sort_unstable();
-    let sum_stats =
-        |f: fn(&DaemonStats) -> u64| incarnations.iter().filter_map(|i| i.stats.as_ref()).map(f).sum::<u64>();
+    let stats = || soak.incarnations.iter().filter_map(|i| i.stats.as_ref());
+    let sum_stats = |f: fn(&DaemonStats) -> u64| stats().map(f).sum::<u64>();
     let mut daemon_errors: BTreeMap<String, u64> = BTreeMap::new();
-    for s in incarnations.iter().filter_map(|i| i.stats.as_ref()) {
+    for s in stats() {
         for (status, n) in &s.errors {
             *daemon_errors.entry(Status::name(*status).to_string()).or_default() += n;
         }
     }
-    let report = serde_json::json!({
-        "duration_s": cfg.secs,
-        "clients": cfg.clients,
-        "load_average_start": load_at_start,
-        "load_average_end": load_at_end,
-        "requests_sent": sent_total,
-        "outcomes": counts,
-        "client_latency_us": {
-            "answers": latencies.len(),
-            "p50": percentile(&latencies, 0.5),
-            "p90": percentile(&latencies, 0.9),
-            "p99": percentile(&latencies, 0.99),
-            "max": latencies.last().copied().unwrap_or(0),
-        },
+    let f = &soak.faults;
+    serde_json::json!({
+        "duration_s": soak.cfg.secs,
+        "clients": soak.cfg.clients,
+        "load_average_start": soak.load_at_start,
+        "load_average_end": soak.load_at_end,
+        "requests_sent": c.clients.sent,
+        "outcomes": c.clients.counts,
+        "client_latency_us": percentiles(&latencies),
         "faults": {
-            "client_kill9": faults.client_kill9,
-            "client_kill9_mid_request": faults.client_kill9_mid_request,
-            "daemon_kill9": faults.daemon_kill9,
-            "daemon_sigterm": faults.daemon_sigterm,
+            "client_kill9": f.client_kill9,
+            "client_kill9_mid_request": f.client_kill9_mid_request,
+            "daemon_kill9": f.daemon_kill9,
+            "daemon_sigterm": f.daemon_sigterm,
         },
         "writer": {
-            "batches_applied": applied.len(),
-            "final_version": version,
-            "inline": inline,
-            "ack_lost": ack_lost,
-            "rejected_invalid": rejected_invalid,
-            "retries": retries,
+            "batches_applied": w.applied.len(),
+            "final_version": w.version,
+            "inline": w.inline,
+            "ack_lost": w.ack_lost,
+            "rejected_invalid": w.rejected_invalid,
+            "retries": w.retries,
         },
-        "verified_offline": verified,
+        "verified_offline": c.verified,
         "daemon": {
             "queries_served": sum_stats(|s| s.queries_served),
             "map_requests": sum_stats(|s| s.map_requests),
             // Searches of clients killed mid-request that the daemon stopped.
             "queries_abandoned": sum_stats(|s| s.queries_abandoned),
             "errors_by_code": daemon_errors,
-            "rss_max_kib": rss_max,
-            "shm_segments": {"settled": settle, "max": shm_max},
-            "incarnations": incarnations.iter().map(|i| {
+            "rss_max_kib": c.rss_max,
+            "shm_segments": {"settled": c.shm_settled, "max": c.shm_max},
+            "incarnations": soak.incarnations.iter().map(|i| {
                 let (s, e) = i.rss_start_end();
                 serde_json::json!({
                     "pid": i.pid,
@@ -553,19 +688,24 @@ fn soak_with_chaos_loses_nothing_and_answers_every_request() {
                 })
             }).collect::<Vec<_>>(),
         },
-        "leftovers": {"shm": shm_left, "state": state_left},
-        "failures": failures.len(),
-    });
+        "leftovers": {"shm": soak.shm_left, "state": soak.state_left},
+        "failures": failures,
+    })
+}
+
+#[test]
+fn soak_with_chaos_loses_nothing_and_answers_every_request() {
+    let checked = check(soak(Config::from_env()));
+    let failures: Vec<String> = CASES
+        .iter()
+        .flat_map(|(case, holds)| holds(&checked).into_iter().map(move |f| format!("{case}: {f}")))
+        .collect();
+    let report = report(&checked, failures.len());
     println!("{report:#}");
-    if let Some(path) = &cfg.report {
+    if let Some(path) = &checked.soak.cfg.report {
         std::fs::write(path, format!("{report:#}\n")).expect("write the soak report");
     }
-
+    let run = &checked.soak.run;
     assert!(failures.is_empty(), "{} failures (logs in {}):\n{}", failures.len(), run.display(), failures.join("\n"));
-    assert!(shm_left.is_empty() && state_left.is_empty(), "left behind: {shm_left:?} {state_left:?}");
-    // The soak did what it claims.
-    assert!(faults.client_kill9 >= 1 && faults.daemon_kill9 >= 1 && faults.daemon_sigterm >= 1, "{faults:?}");
-    assert!(counts.get("ok").copied().unwrap_or(0) >= 20, "too few answers: {counts:?}");
-    assert!(!applied.is_empty() && verified >= 10, "{} batches, {verified} answers verified", applied.len());
-    let _ = std::fs::remove_dir_all(&run);
+    let _ = std::fs::remove_dir_all(run);
 }

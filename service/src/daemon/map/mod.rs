@@ -210,3 +210,6 @@ fn request_json(request: &MapRequest) -> (&'static str, serde_json::Value) {
         MapRequest::List { .. } => ("list", json!({})),
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -179,3 +179,6 @@ fn deliver(
 fn micros_since(received: Instant) -> u64 {
     u64::try_from(received.elapsed().as_micros()).unwrap_or(u64::MAX)
 }
+
+#[cfg(test)]
+mod tests;
