@@ -21,6 +21,7 @@
 
 mod delta;
 mod obstacle;
+mod region;
 pub mod octomap;
 mod segment;
 mod voxels;
