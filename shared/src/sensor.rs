@@ -237,7 +237,9 @@ mod tests {
             v.push(p.viewer_yaw.to_bits());
             v
         };
-        for params in [Params::default(), Params { camera_pitch: -0.3, t_vs: Vector3::new(0.2, -0.1, 0.3), ..Params::default() }] {
+        for params in
+            [Params::default(), Params { camera_pitch: -0.3, t_vs: Vector3::new(0.2, -0.1, 0.3), ..Params::default() }]
+        {
             let rig = SensorRig::new(&params);
             let space = SearchSpace::new(&params);
             let formula = |target: &Point3<f64>, x: &SensorState| {

@@ -21,8 +21,8 @@
 
 mod delta;
 mod obstacle;
-mod region;
 pub mod octomap;
+mod region;
 mod segment;
 mod voxels;
 

@@ -100,7 +100,10 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
     let floors = if args.no_floor {
         Vec::new()
     } else {
-        args.models.iter().map(|m| Ok((*m, evaluation_floor(*m, &args.data, 200_000)?))).collect::<anyhow::Result<_>>()?
+        args.models
+            .iter()
+            .map(|m| Ok((*m, evaluation_floor(*m, &args.data, 200_000)?)))
+            .collect::<anyhow::Result<_>>()?
     };
     let comparison = compare(&config, &cases, &args.baseline, &new, &floors, |line| eprintln!("{line}"))?;
     print!("{}", comparison.table());
