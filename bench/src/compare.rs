@@ -175,11 +175,11 @@ fn read_scenario(path: &Path) -> anyhow::Result<Scenario> {
         .with_context(|| format!("{} is not a valid scenario", path.display()))
 }
 
-/// The maps of each kind, as (name, scenario JSON, extra files to write beside it).
-fn maps_of(
-    kind: MapKind,
-    config: &CompareConfig,
-) -> anyhow::Result<Vec<(String, serde_json::Value, Vec<(String, Vec<u8>)>)>> {
+/// One map: its name, scenario JSON and the files to write beside it (name, bytes).
+type MapFiles = (String, serde_json::Value, Vec<(String, Vec<u8>)>);
+
+/// The maps of each kind.
+fn maps_of(kind: MapKind, config: &CompareConfig) -> anyhow::Result<Vec<MapFiles>> {
     let plain = |name: String, s: &Scenario| -> anyhow::Result<_> {
         Ok((name, serde_json::from_str::<serde_json::Value>(&s.to_json())?, Vec::new()))
     };
