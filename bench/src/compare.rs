@@ -23,13 +23,19 @@ use crate::numerical::{NumericalConfig, numerical_map, numerical_maps, voxelized
 use crate::octomap::{Building, RESOLUTION};
 use crate::stats::quantile_sorted;
 use anyhow::{Context, bail};
+use dyfos_service::learned::load_model;
+use dyfos_service::lupp::{Evaluation, Lupp};
 use dyfos_shared::answer::{Algorithm, EvalStats};
+use dyfos_shared::params::ModelKind;
 use dyfos_shared::scenario::Scenario;
+use dyfos_shared::sdsmm::NoiseModel;
+use dyfos_shared::sensor::SensorState;
 use dyfos_shared::world::World;
 use dyfos_shared::world::octomap::write_bt;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::Instant;
 
 /// What kind of map a scenario holds (a column of the comparison).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
@@ -169,11 +175,11 @@ fn read_scenario(path: &Path) -> anyhow::Result<Scenario> {
         .with_context(|| format!("{} is not a valid scenario", path.display()))
 }
 
-/// The maps of each kind, as (name, scenario JSON, extra files to write beside it).
-fn maps_of(
-    kind: MapKind,
-    config: &CompareConfig,
-) -> anyhow::Result<Vec<(String, serde_json::Value, Vec<(String, Vec<u8>)>)>> {
+/// One map: its name, scenario JSON and the files to write beside it (name, bytes).
+type MapFiles = (String, serde_json::Value, Vec<(String, Vec<u8>)>);
+
+/// The maps of each kind.
+fn maps_of(kind: MapKind, config: &CompareConfig) -> anyhow::Result<Vec<MapFiles>> {
     let plain = |name: String, s: &Scenario| -> anyhow::Result<_> {
         Ok((name, serde_json::from_str::<serde_json::Value>(&s.to_json())?, Vec::new()))
     };
@@ -556,6 +562,47 @@ impl Comparison {
     }
 }
 
+/// A feasible candidate of `scenario` on its map without obstacles: the first of a
+/// few fixed ones the workspace admits.
+fn floor_candidate(lupp: &Lupp) -> Option<SensorState> {
+    let s = lupp.space();
+    let mid = 0.5 * (s.lo[0] + s.hi[0]);
+    (0..8)
+        .map(|k| SensorState::new(mid, 0.1, -0.1, -3.0 + 0.75 * f64::from(k)))
+        .find(|x| matches!(lupp.evaluate(x), Evaluation::Feasible { .. }))
+}
+
+/// The evaluation floor, µs: one [`Lupp::evaluate`] of a fixed feasible candidate,
+/// on SPEC §10 map 0 (seed [`MAP_SEED`]) with its obstacles removed, scored with
+/// `model` (`learned`: `data/learned/model.bin`); the median of 5 timed loops of `iterations` evaluations.
+pub fn evaluation_floor(model: Model, data: &Path, iterations: u64) -> anyhow::Result<f64> {
+    let kind = if model == Model::Anisotropic { ModelKind::Anisotropic } else { ModelKind::Paper };
+    let mut scenario = numerical_map(MAP_SEED, 0, &NumericalConfig::paper().model(kind));
+    let weights = match model {
+        Model::Learned => {
+            scenario.params.model = ModelKind::Learned;
+            let file = data.join("learned/model.bin");
+            Some(load_model(&file).with_context(|| format!("cannot load {}", file.display()))?)
+        }
+        _ => None,
+    };
+    let noise = NoiseModel::from_params_and_weights(&scenario.params, weights.as_ref())?;
+    let world = World::new(0, *scenario.world.bounds(), *scenario.world.sun(), [], None)?;
+    let lupp = Lupp::new(&world, &scenario.belief, &scenario.params, &noise);
+    let x = floor_candidate(&lupp).context("no feasible candidate for the floor")?;
+    let iterations = iterations.max(1);
+    let mut times: Vec<f64> = (0..5)
+        .map(|_| {
+            let started = Instant::now();
+            for _ in 0..iterations {
+                std::hint::black_box(lupp.evaluate(std::hint::black_box(&x)));
+            }
+            started.elapsed().as_secs_f64() * 1e6 / iterations as f64
+        })
+        .collect();
+    Ok(median(&mut times))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -582,6 +629,16 @@ mod tests {
         assert_eq!((row.baseline_micros, row.new_micros, row.ratio), (200.0, 100.0, 2.0));
         // 100 µs over 10 evaluations × 2 µs.
         assert_eq!(row.new_floor_multiple, Some(5.0));
+    }
+
+    #[test]
+    fn the_floor_is_a_positive_time_per_evaluation() {
+        let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data");
+        for model in [Model::Paper, Model::Learned] {
+            let floor = evaluation_floor(model, &data, 1000).unwrap();
+            assert!(floor > 0.0 && floor < 1e4, "{model:?}: {floor}");
+        }
+        assert!(evaluation_floor(Model::Learned, Path::new("/nonexistent"), 10).is_err());
     }
 
     #[test]

@@ -140,6 +140,18 @@ pub struct Lupp<'a> {
     /// The belief's mean heading θ (for the `learned` model's relative bearing).
     heading: f64,
     reach: f64,
+    /// The box spanned by `targets`.
+    target_box: (Point3<f64>, Point3<f64>),
+}
+
+/// Segment checks of one candidate a caller has already proved to pass (by a
+/// region test over many candidates at once): [`Lupp::evaluate_pose`] skips them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Cleared {
+    /// No collision segment touches anything.
+    pub collision: bool,
+    /// No sight line touches anything.
+    pub occlusion: bool,
 }
 
 impl<'a> Lupp<'a> {
@@ -157,6 +169,7 @@ impl<'a> Lupp<'a> {
             let a = theta + std::f64::consts::TAU * f64::from(k) / f64::from(n);
             Point3::new(marker.x + params.rover_radius * a.cos(), marker.y + params.rover_radius * a.sin(), marker.z)
         }));
+        let target_box = targets.iter().fold((marker, marker), |(lo, hi), q| (lo.inf(q), hi.sup(q)));
         Lupp {
             world,
             model,
@@ -169,6 +182,7 @@ impl<'a> Lupp<'a> {
             targets,
             heading: theta,
             reach: params.viewer_radius + params.safety_margin,
+            target_box,
         }
     }
 
@@ -187,14 +201,48 @@ impl<'a> Lupp<'a> {
         self.targets[0]
     }
 
+    /// The viewer's camera mounting.
+    pub fn rig(&self) -> &SensorRig {
+        &self.rig
+    }
+
     /// Feasibility and cost of `x`: the hot path, no allocation.
     #[inline]
     pub fn evaluate(&self, x: &SensorState) -> Evaluation {
-        let pose = self.rig.pose(&self.targets[0], x);
-        if let Some(why) = self.first_violation(&pose) {
+        self.evaluate_pose(&self.rig.pose(&self.targets[0], x), Cleared::default())
+    }
+
+    /// Feasibility and cost of the candidate whose pose is `pose` (from
+    /// [`SensorRig::pose`] or its parts), skipping the segment checks `cleared`
+    /// says pass. The caller must have proved them, e.g. by
+    /// [`World::box_is_clear`] on a box holding [`Lupp::collision_box`] or
+    /// [`Lupp::sight_box`]: then the verdict is [`Lupp::evaluate`]'s, bit for bit.
+    #[inline]
+    pub fn evaluate_pose(&self, pose: &SensorPose, cleared: Cleared) -> Evaluation {
+        if let Some(why) = self.first_violation(pose, cleared) {
             return Evaluation::Rejected(why);
         }
-        Evaluation::Feasible { cost: self.prior.cost(&self.noise(&pose)) }
+        Evaluation::Feasible { cost: self.prior.cost(&self.noise(pose)) }
+    }
+
+    /// Whether a viewer at `p_v` is inside the map bounds and altitude limits (SPEC §5.1).
+    #[inline]
+    pub fn in_workspace(&self, p_v: &Point3<f64>) -> bool {
+        self.world.bounds().contains(p_v.x, p_v.y) && self.params.z_min <= p_v.z && p_v.z <= self.params.z_max
+    }
+
+    /// A box holding every collision segment of `pose` (SPEC §5.2): the cube of
+    /// half-side `viewer_radius + safety_margin` around the viewer.
+    #[inline]
+    pub fn collision_box(&self, pose: &SensorPose) -> (Point3<f64>, Point3<f64>) {
+        let r = Vector3::repeat(self.reach);
+        (pose.viewer_position - r, pose.viewer_position + r)
+    }
+
+    /// A box holding every sight line of `pose` (SPEC §5.3): the sensor and the targets.
+    #[inline]
+    pub fn sight_box(&self, pose: &SensorPose) -> (Point3<f64>, Point3<f64>) {
+        (self.target_box.0.inf(&pose.position), self.target_box.1.sup(&pose.position))
     }
 
     #[inline]
@@ -211,13 +259,15 @@ impl<'a> Lupp<'a> {
     }
 
     #[inline]
-    fn first_violation(&self, pose: &SensorPose) -> Option<Violation> {
-        let p_v = &pose.viewer_position;
-        if !(self.world.bounds().contains(p_v.x, p_v.y) && self.params.z_min <= p_v.z && p_v.z <= self.params.z_max) {
+    fn first_violation(&self, pose: &SensorPose, cleared: Cleared) -> Option<Violation> {
+        if !self.in_workspace(&pose.viewer_position) {
             return Some(Violation::Workspace);
         }
-        if self.world.any_contact(&self.collision_rays(pose)) {
+        if !cleared.collision && self.world.any_contact(&self.collision_rays(pose)) {
             return Some(Violation::Collision);
+        }
+        if cleared.occlusion {
+            return None;
         }
         let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
         for chunk in self.targets.chunks(SIGHT_BATCH) {

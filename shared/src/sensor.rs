@@ -116,6 +116,17 @@ impl SensorPose {
     }
 }
 
+/// What a pose takes from the viewer yaw ψ_v alone ([`SensorRig::yaw_frame`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct YawFrame {
+    /// ψ_v.
+    pub yaw: f64,
+    /// `R_ws = Rz(ψ_v)·Ry(camera_pitch)`.
+    pub rotation: Matrix3<f64>,
+    /// `Rz(ψ_v)·t_vs`: the sensor's offset from the viewer, world frame.
+    pub offset: Vector3<f64>,
+}
+
 /// The camera's mounting on the viewer, precomputed from [`Params`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SensorRig {
@@ -134,12 +145,31 @@ impl SensorRig {
     /// `p_v = p_s − Rz(ψ_v)·t_vs`.
     #[inline]
     pub fn pose(&self, target: &Point3<f64>, x: &SensorState) -> SensorPose {
-        let yaw = rot_z(x.yaw);
-        let rotation = yaw * self.pitch;
-        let d_s = Vector3::new(1.0, x.psi.tan(), x.phi.tan()).normalize();
-        let position = target - rotation * d_s * x.rho;
-        let viewer_position = position - yaw * self.t_vs;
-        SensorPose { position, rotation, viewer_position, viewer_yaw: x.yaw }
+        self.pose_from(target, x.rho, &Self::direction(x.psi, x.phi), &self.yaw_frame(x.yaw))
+    }
+
+    /// The marker's direction in the sensor frame, `d_s = normalize(1, tan ψ, tan φ)`:
+    /// the part of [`SensorRig::pose`] that depends on ψ and φ alone.
+    #[inline]
+    pub fn direction(psi: f64, phi: f64) -> Vector3<f64> {
+        Vector3::new(1.0, psi.tan(), phi.tan()).normalize()
+    }
+
+    /// The part of [`SensorRig::pose`] that depends on the yaw alone.
+    #[inline]
+    pub fn yaw_frame(&self, yaw: f64) -> YawFrame {
+        let turn = rot_z(yaw);
+        YawFrame { yaw, rotation: turn * self.pitch, offset: turn * self.t_vs }
+    }
+
+    /// [`SensorRig::pose`] from its parts, with the same operations in the same
+    /// order (so the same bits): a search over a grid computes each part once per
+    /// axis value instead of once per candidate.
+    #[inline]
+    pub fn pose_from(&self, target: &Point3<f64>, rho: f64, direction: &Vector3<f64>, frame: &YawFrame) -> SensorPose {
+        let position = target - frame.rotation * direction * rho;
+        let viewer_position = position - frame.offset;
+        SensorPose { position, rotation: frame.rotation, viewer_position, viewer_yaw: frame.yaw }
     }
 
     /// The sensor pose of a viewer at `viewer_position` with yaw `viewer_yaw` (the
@@ -192,6 +222,49 @@ mod tests {
                 assert!(q.w >= 0.0, "pitch {pitch}, yaw {yaw}: {q:?}");
                 assert!((q.to_rotation_matrix().matrix() - pose.rotation).norm() < 1e-14);
                 assert_eq!(crate::math::canonical_xyzw(&q), [q.i, q.j, q.k, q.w].map(|v| v + 0.0));
+            }
+        }
+    }
+
+    /// The pose from precomputed parts is SPEC §4's formula evaluated in one go, bit
+    /// for bit: a grid search relies on it to give the answers of one candidate at
+    /// a time.
+    #[test]
+    fn pose_from_parts_is_the_pose_bit_for_bit() {
+        let bits = |p: &SensorPose| {
+            let mut v: Vec<u64> = p.position.iter().chain(p.viewer_position.iter()).map(|x| x.to_bits()).collect();
+            v.extend(p.rotation.iter().map(|x| x.to_bits()));
+            v.push(p.viewer_yaw.to_bits());
+            v
+        };
+        for params in
+            [Params::default(), Params { camera_pitch: -0.3, t_vs: Vector3::new(0.2, -0.1, 0.3), ..Params::default() }]
+        {
+            let rig = SensorRig::new(&params);
+            let space = SearchSpace::new(&params);
+            let formula = |target: &Point3<f64>, x: &SensorState| {
+                let yaw = rot_z(x.yaw);
+                let rotation = yaw * rot_y(params.camera_pitch);
+                let d_s = Vector3::new(1.0, x.psi.tan(), x.phi.tan()).normalize();
+                let position = target - rotation * d_s * x.rho;
+                SensorPose { position, rotation, viewer_position: position - yaw * params.t_vs, viewer_yaw: x.yaw }
+            };
+            let target = Point3::new(3.7, -8.1, 0.2);
+            for i in 0..7 {
+                let rho = space.lo[0] + f64::from(i) * (space.hi[0] - space.lo[0]) / 6.0;
+                for j in 0..9 {
+                    let psi = space.lo[1] + f64::from(j) * (space.hi[1] - space.lo[1]) / 8.0;
+                    for k in 0..9 {
+                        let phi = space.lo[2] + f64::from(k) * (space.hi[2] - space.lo[2]) / 8.0;
+                        let direction = SensorRig::direction(psi, phi);
+                        for m in 0..72 {
+                            let x = SensorState::new(rho, psi, phi, -PI + 2.0 * PI * f64::from(m) / 72.0);
+                            let parts = rig.pose_from(&target, rho, &direction, &rig.yaw_frame(x.yaw));
+                            assert_eq!(bits(&parts), bits(&formula(&target, &x)), "{x:?}");
+                            assert_eq!(bits(&rig.pose(&target, &x)), bits(&parts));
+                        }
+                    }
+                }
             }
         }
     }

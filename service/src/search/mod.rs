@@ -173,6 +173,15 @@ impl<'l, 'a> Evaluator<'l, 'a> {
     /// equal costs).
     #[inline]
     pub fn evaluate(&mut self, x: &SensorState) -> Option<Evaluation> {
+        self.evaluate_with(x, |lupp| lupp.evaluate(x))
+    }
+
+    /// As [`Evaluator::evaluate`], with the verdict on `x` given by `verdict`: for a
+    /// search that knows more about `x` than the pipeline does (its pose, computed
+    /// from parts; checks settled for many candidates at once). `verdict` must give
+    /// exactly what [`Lupp::evaluate`] gives for `x`.
+    #[inline]
+    pub fn evaluate_with(&mut self, x: &SensorState, verdict: impl FnOnce(&Lupp) -> Evaluation) -> Option<Evaluation> {
         if self.stopped.is_some() {
             return None;
         }
@@ -194,7 +203,7 @@ impl<'l, 'a> Evaluator<'l, 'a> {
                 return None;
             }
         }
-        let e = self.lupp.evaluate(x);
+        let e = verdict(self.lupp);
         e.count(&mut self.stats);
         // A NaN cost (no valid model should give one) must not become a best that
         // nothing can beat.

@@ -22,6 +22,7 @@
 mod delta;
 mod obstacle;
 pub mod octomap;
+mod region;
 mod segment;
 mod voxels;
 

@@ -24,6 +24,10 @@ fn a_build_against_itself_gives_identical_answers_and_a_ratio() {
     assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     let row = stdout.lines().find(|l| l.starts_with("| dyfos | numerical | paper | 2 |")).expect("a group line");
     assert!(row.ends_with("| identical |"), "{row}");
+    // The evaluation floor is measured and each query is set against it.
+    assert!(stdout.contains("floor (paper): "), "{stdout}");
+    let floor_column = row.split('|').nth(10).unwrap().trim();
+    assert!(floor_column.contains(" / ") && !floor_column.contains("NaN"), "{row}");
     assert!(stdout.contains("2 queries, 1 rounds, --threads 1: every answer identical"), "{stdout}");
     let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let _ = std::fs::remove_file(&json);

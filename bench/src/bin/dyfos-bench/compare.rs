@@ -4,7 +4,7 @@
 //! is identical.
 
 use anyhow::Context;
-use dyfos_bench::compare::{CompareConfig, MapKind, Model, compare, write_cases};
+use dyfos_bench::compare::{CompareConfig, MapKind, Model, compare, evaluation_floor, write_cases};
 use dyfos_shared::answer::Algorithm;
 use std::path::PathBuf;
 
@@ -48,6 +48,11 @@ pub struct CompareArgs {
     /// Where the scenario files are written (default: a fresh directory under the system's temporary one).
     #[arg(long, value_name = "DIR")]
     scenarios: Option<PathBuf>,
+    /// Skip the evaluation floor (one evaluation of a feasible candidate on an empty
+    /// map, in this process, per model), and with it the "× floor" column: each
+    /// query's `micros` over (its evaluations × the floor).
+    #[arg(long)]
+    no_floor: bool,
     /// Also write the whole comparison (every run) as JSON here.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
@@ -91,7 +96,16 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
         .unwrap_or_else(|| std::env::temp_dir().join(format!("dyfos-compare-{}", std::process::id())));
     let cases = write_cases(&config, &dir)?;
     eprintln!("{} scenario files in {}", cases.len(), dir.display());
-    let comparison = compare(&config, &cases, &args.baseline, &new, &[], |line| eprintln!("{line}"))?;
+    // The floor is this process's pipeline: meaningful for `--new` when it is this build.
+    let floors = if args.no_floor {
+        Vec::new()
+    } else {
+        args.models
+            .iter()
+            .map(|m| Ok((*m, evaluation_floor(*m, &args.data, 200_000)?)))
+            .collect::<anyhow::Result<_>>()?
+    };
+    let comparison = compare(&config, &cases, &args.baseline, &new, &floors, |line| eprintln!("{line}"))?;
     print!("{}", comparison.table());
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&comparison)?)
