@@ -123,12 +123,11 @@ def test_parameters_are_checked_at_start_and_when_set(ros: Ros, daemon: Any, sta
         assert out.returncode == 2, (bad, out.stdout, out.stderr)
         assert needle in out.stderr, out.stderr
     start_node(ros, daemon, map_id=2**63 - 1, rho_max=7)  # an integer for a float is taken
-    setter = ros.client(SetParameters, "/dyfos/set_parameters")
 
     def set_(name: str, value: Any) -> Any:
-        future = setter.call_async(SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()]))
-        ros.spin_until(future.done, what="set_parameters")
-        return future.result().results[0]
+        # `ros.call` sends again a request whose reply found no reader yet (setting is idempotent).
+        request = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
+        return ros.call(SetParameters, "/dyfos/set_parameters", request).results[0]
 
     refused = set_("map_id", -3)
     assert not refused.successful and "map_id" in refused.reason
