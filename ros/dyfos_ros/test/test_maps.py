@@ -204,11 +204,9 @@ def test_a_map_is_refused_without_bounds_or_in_another_frame_and_follows_paramet
     maps.publish(octomap_msg(bt))
     eventually(lambda: "`bounds` and `sun`" in map_status().message, "a map without bounds refused", spin=ros)
     assert map_status().level == DiagnosticStatus.ERROR
-    setter = ros.client(SetParameters, "/dyfos/set_parameters")
     params = [Parameter(k, value=v).to_parameter_msg() for k, v in MAP_PARAMS.items()]
-    future = setter.call_async(SetParameters.Request(parameters=params))
-    ros.spin_until(future.done, what="set_parameters")
-    assert all(r.successful for r in future.result().results)
+    set_map = ros.call(SetParameters, "/dyfos/set_parameters", SetParameters.Request(parameters=params))
+    assert all(r.successful for r in set_map.results)
     # The last map is sent again with the parameters, without a new message.
     eventually(
         lambda: map_values(diagnostics).get("version") is not None and map_status().level == DiagnosticStatus.OK,
@@ -219,10 +217,8 @@ def test_a_map_is_refused_without_bounds_or_in_another_frame_and_follows_paramet
         snapshot = client.snapshot(0xC3)
         assert snapshot["bounds"] == MAP_PARAMS["bounds"]
         assert len(snapshot["voxels"]["occupied"]) == 185_673
-        future = setter.call_async(
-            SetParameters.Request(parameters=[Parameter("sun", value=[0.5, 1.0]).to_parameter_msg()])
-        )
-        ros.spin_until(future.done, what="set_parameters")
+        set_sun = SetParameters.Request(parameters=[Parameter("sun", value=[0.5, 1.0]).to_parameter_msg()])
+        ros.call(SetParameters, "/dyfos/set_parameters", set_sun)
         eventually(lambda: client.snapshot(0xC3)["sun"] == {"elevation": 0.5, "azimuth": 1.0}, "the new sun")
 
 

@@ -50,10 +50,8 @@ def test_node_parameters_apply_and_a_request_overrides_them(
     got = ros.call(FindSensorPose, SERVICE, req)
     assert_answer_is(got, solve(tmp_path, {**s, "params": {**node_params, **own}}, "dyfos", 2), req.belief)
     # A parameter set at run time applies to the next request.
-    setter = ros.client(SetParameters, "/dyfos/set_parameters")
-    future = setter.call_async(SetParameters.Request(parameters=parameters({"lambda": 0.5})))
-    ros.spin_until(future.done, what="set_parameters")
-    assert future.result().results[0].successful
+    set_lambda = SetParameters.Request(parameters=parameters({"lambda": 0.5}))
+    assert ros.call(SetParameters, "/dyfos/set_parameters", set_lambda).results[0].successful
     req = request(map_id, {**s, "params": {}}, seed=2)
     got = ros.call(FindSensorPose, SERVICE, req)
     assert_answer_is(got, solve(tmp_path, {**s, "params": {**node_params, "lambda": 0.5}}, "dyfos", 2), req.belief)
