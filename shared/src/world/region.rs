@@ -51,16 +51,9 @@ impl World {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::world::tests::Lcg;
     use crate::world::{AxisBox, Bounds, Obstacle, Segment, Sun, VerticalCylinder, VoxelGrid};
     use nalgebra::Point2;
-
-    struct Lcg(u64);
-    impl Lcg {
-        fn next(&mut self) -> f64 {
-            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
 
     fn world(rng: &mut Lcg, n: usize, voxels: bool) -> World {
         let obstacles: Vec<(u32, Obstacle)> = (0..n)
