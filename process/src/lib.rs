@@ -8,6 +8,7 @@
 //! - [`idle`]: whether the machine has a core to spare, for the wait strategies of
 //!   the daemon and the client;
 //! - [`shutdown`]: Ctrl-C and SIGTERM noticed and latched, never fatal;
+//! - [`abandoned`]: iceoryx2 services whose creator died creating them, removed;
 //! - [`child`]: a child process killed when its owner lets go of it;
 //! - [`netns`]: network namespaces standing for hosts on one machine (Linux);
 //! - [`logging`] (feature `logging`): the log on stderr, with its flood limit;
@@ -22,6 +23,7 @@
 // the one iceoryx2 would give it.
 extern crate iceoryx2_bb_loggers as _;
 
+pub mod abandoned;
 pub mod child;
 #[cfg(feature = "cli")]
 pub mod cli;

@@ -147,6 +147,32 @@ impl Sandbox {
         (node, dyfos_shared::wire::ServiceNames::new(&self.prefix).expect("prefix"))
     }
 
+    /// Leaves in this sandbox's domain what a process killed while creating service
+    /// `name` (`pattern`) leaves behind: its static file, still being written
+    /// (owner read-write), and no node's tag. iceoryx2 reads the service as being
+    /// created for good. Returns the file.
+    pub fn leave_half_created(
+        &self,
+        name: &str,
+        pattern: iceoryx2::service::messaging_pattern::MessagingPattern,
+    ) -> PathBuf {
+        use iceoryx2::service::Service;
+        use std::os::unix::fs::PermissionsExt;
+        type Ipc = iceoryx2::prelude::ipc::Service;
+        let config = dyfos_shared::wire::services::iceoryx_config(Some(&self.domain)).expect("domain");
+        let global = &config.global;
+        let name = iceoryx2::prelude::ServiceName::new(name).expect("service name");
+        let hash =
+            iceoryx2::service::service_hash::ServiceHash::new::<<Ipc as Service>::ServiceNameHasher>(&name, pattern);
+        let dir = PathBuf::from(global.service_dir().to_string());
+        std::fs::create_dir_all(&dir).expect("service directory");
+        let file =
+            dir.join(format!("{}{}{}", global.prefix, hash.as_str(), global.service.static_config_storage_suffix));
+        std::fs::File::create(&file).expect("static file");
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600)).expect("permissions");
+        file
+    }
+
     /// The flags that point a `dyfos` command at this sandbox's daemon.
     pub fn dyfos_flags(&self) -> Vec<String> {
         vec!["--prefix".into(), self.prefix.clone(), "--domain".into(), self.domain.clone()]

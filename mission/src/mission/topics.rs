@@ -21,15 +21,18 @@
 
 use dyfos_client::Ipc;
 use dyfos_client::iceoryx_config;
+use dyfos_process::abandoned::remove_abandoned_creation;
 use dyfos_shared::wire::mission::topic_name;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::service::messaging_pattern::MessagingPattern;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 use std::fmt::Debug;
 use std::time::{Duration, Instant};
+use tracing::warn;
 
 /// A topic's publish-subscribe service, its event service and its name.
 type Pair<T> = (String, PubSubFactory<Ipc, T, ()>, iceoryx2::service::port_factory::event::PortFactory<Ipc>);
@@ -114,8 +117,10 @@ impl Topics {
         let service_name = ServiceName::new(&name).map_err(|e| err(format!("{e:?}")))?;
         let event_name = ServiceName::new(&format!("{name}.event")).map_err(|e| err(format!("{e:?}")))?;
         let start = Instant::now();
+        let mut abandoned_checked = false;
         // Several processes open the same topics at start; one of them wins the
-        // creation and the others retry until it is done.
+        // creation and the others retry until it is done. A creation still unfinished
+        // after a second may be one its creator died in (see `dyfos_process::abandoned`).
         loop {
             let pubsub = self
                 .node
@@ -138,8 +143,24 @@ impl Topics {
                 .open_or_create();
             match (pubsub, event) {
                 (Ok(p), Ok(e)) => return Ok((name, p, e)),
-                (p, e) if start.elapsed() > Duration::from_secs(2) => {
+                (p, e) if start.elapsed() > Duration::from_secs(3) => {
                     return Err(err(format!("{:?} / {:?}", p.err(), e.err())));
+                }
+                _ if !abandoned_checked && start.elapsed() > Duration::from_secs(1) => {
+                    abandoned_checked = true;
+                    for (service, pattern) in
+                        [(&service_name, MessagingPattern::PublishSubscribe), (&event_name, MessagingPattern::Event)]
+                    {
+                        match remove_abandoned_creation(&self.node, service, pattern) {
+                            Ok(true) => {
+                                warn!(service = %service, "removed what a process killed while creating this service left behind")
+                            }
+                            Ok(false) => {}
+                            Err(e) => {
+                                warn!(service = %service, "cannot check whether this service's creator died: {e}")
+                            }
+                        }
+                    }
                 }
                 _ => std::thread::sleep(Duration::from_millis(10)),
             }

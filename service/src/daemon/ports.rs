@@ -5,6 +5,7 @@
 
 use super::error::{DaemonCreateError, IpcError};
 use super::rendezvous::Connected;
+use dyfos_process::abandoned::remove_abandoned_creation;
 use dyfos_shared::limits::SNAPSHOT_PAGE_RECORDS;
 use dyfos_shared::wire::ServiceNames;
 use dyfos_shared::wire::map::{MapReplyHeader, MapRequestHeader, WireDelta};
@@ -16,8 +17,9 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
+use iceoryx2::service::messaging_pattern::MessagingPattern;
 use iceoryx2::service::port_factory::server::ServerCreateError;
-use tracing::{debug, info};
+use tracing::{debug, info, warn};
 
 type RendezvousServer = Server<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
 type MapServer = Server<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapReplyHeader>;
@@ -66,6 +68,34 @@ impl Replies {
     }
 }
 
+/// Opens a service with `open`; if that fails because a process killed while
+/// creating the service left it half made (see `dyfos_process::abandoned`), removes
+/// the remains and opens once more. A daemon restarted after such a death would
+/// otherwise find the name unusable for good.
+fn recovering<T, E>(
+    node: &Node<Ipc>,
+    name: &str,
+    pattern: MessagingPattern,
+    open: impl Fn() -> Result<Result<T, E>, DaemonCreateError>,
+) -> Result<Result<T, E>, DaemonCreateError> {
+    let first = open()?;
+    if first.is_ok() {
+        return Ok(first);
+    }
+    let Ok(service) = ServiceName::new(name) else { return Ok(first) };
+    match remove_abandoned_creation(node, &service, pattern) {
+        Ok(true) => {
+            warn!(service = name, "removed what a process killed while creating this service left behind");
+            open()
+        }
+        Ok(false) => Ok(first),
+        Err(e) => {
+            warn!(service = name, "cannot check whether this service's creator died: {e}");
+            Ok(first)
+        }
+    }
+}
+
 impl Ports {
     /// Cleans up after dead processes (a daemon killed by SIGKILL leaves its shared
     /// memory behind), then opens (or creates) the services named by `names` with
@@ -86,26 +116,26 @@ impl Ports {
             reason: format!("{e:?}"),
         };
         let named = |e| IpcError::new("service name", e);
-        let rendezvous = limits
-            .request_response(services.rendezvous().map_err(named)?)
-            .open_or_create()
-            .map_err(|e| incompatible(&names.rendezvous, &e))?;
-        let map = limits
-            .request_response(services.map().map_err(named)?)
-            .open_or_create()
-            .map_err(|e| incompatible(&names.map, &e))?;
-        let stats = limits
-            .request_response(services.stats().map_err(named)?)
-            .open_or_create()
-            .map_err(|e| incompatible(&names.stats, &e))?;
-        let wake_service = limits
-            .event(services.wake().map_err(named)?)
-            .open_or_create()
-            .map_err(|e| incompatible(&names.wake, &e))?;
-        let reply_service = limits
-            .event(services.reply().map_err(named)?)
-            .open_or_create()
-            .map_err(|e| incompatible(&names.reply, &e))?;
+        let rendezvous = recovering(&node, &names.rendezvous, MessagingPattern::RequestResponse, || {
+            Ok(limits.request_response(services.rendezvous().map_err(named)?).open_or_create())
+        })?
+        .map_err(|e| incompatible(&names.rendezvous, &e))?;
+        let map = recovering(&node, &names.map, MessagingPattern::RequestResponse, || {
+            Ok(limits.request_response(services.map().map_err(named)?).open_or_create())
+        })?
+        .map_err(|e| incompatible(&names.map, &e))?;
+        let stats = recovering(&node, &names.stats, MessagingPattern::RequestResponse, || {
+            Ok(limits.request_response(services.stats().map_err(named)?).open_or_create())
+        })?
+        .map_err(|e| incompatible(&names.stats, &e))?;
+        let wake_service = recovering(&node, &names.wake, MessagingPattern::Event, || {
+            Ok(limits.event(services.wake().map_err(named)?).open_or_create())
+        })?
+        .map_err(|e| incompatible(&names.wake, &e))?;
+        let reply_service = recovering(&node, &names.reply, MessagingPattern::Event, || {
+            Ok(limits.event(services.reply().map_err(named)?).open_or_create())
+        })?
+        .map_err(|e| incompatible(&names.reply, &e))?;
         // A service serves one daemon: another's server there means it runs.
         let server = |e: ServerCreateError| match e {
             ServerCreateError::ExceedsMaxSupportedServers => DaemonCreateError::AlreadyRunning(names.prefix.clone()),

@@ -374,3 +374,25 @@ fn a_request_that_wakes_the_daemon_is_reported_as_work() {
     assert!(client.join().unwrap().unwrap() >= 2);
     daemon.shutdown();
 }
+
+/// A daemon killed while creating its services leaves them half made; the next one
+/// removes the remains and serves instead of failing for good.
+#[test]
+fn a_daemon_starts_over_services_a_killed_creator_left_half_made() {
+    use iceoryx2::service::messaging_pattern::MessagingPattern;
+    let sandbox = Sandbox::new("half-made");
+    let (_, names) = sandbox.ipc_node();
+    let rendezvous = sandbox.leave_half_created(&names.rendezvous, MessagingPattern::RequestResponse);
+    let wake = sandbox.leave_half_created(&names.wake, MessagingPattern::Event);
+    let mut daemon = sandbox.start_daemon(&[]);
+    let answer = sandbox.client().stats(PATIENCE);
+    assert!(answer.is_ok(), "{answer:?}");
+    let log = daemon.log();
+    assert_eq!(
+        log.matches("removed what a process killed while creating this service left behind").count(),
+        2,
+        "{log}"
+    );
+    assert!(daemon.terminate().success(), "{}", daemon.log());
+    assert!(!rendezvous.exists() && !wake.exists(), "the daemon's own services are removed at exit");
+}

@@ -402,3 +402,24 @@ fn the_rover_and_viewer_say_at_exit_what_their_log_left_out() {
         assert!(left_out >= 1 && written.len() + left_out <= 40, "{who}: {written:#?} {summaries:#?}");
     }
 }
+
+/// A mission process killed while creating a topic leaves it half made; the next
+/// process to open the topic removes the remains and opens it.
+#[test]
+fn a_topic_a_killed_creator_left_half_made_opens() {
+    use dyfos_mission::mission::topics::{Topics, TopicsConfig};
+    use dyfos_shared::wire::mission::{RENDEZVOUS_TOPIC, RendezvousStateMsg, topic_name};
+    use iceoryx2::service::messaging_pattern::MessagingPattern;
+    let sandbox = Sandbox::new("half-made-topic");
+    let config =
+        TopicsConfig { prefix: sandbox.prefix.clone(), domain: Some(sandbox.domain.clone()), mission: "m".into() };
+    let name = topic_name(&config.prefix, "mission", &config.mission, RENDEZVOUS_TOPIC);
+    let pubsub = sandbox.leave_half_created(&name, MessagingPattern::PublishSubscribe);
+    let event = sandbox.leave_half_created(&format!("{name}.event"), MessagingPattern::Event);
+    let topics = Topics::open(&config).expect("node");
+    let inbox = topics.inbox::<RendezvousStateMsg>("mission", RENDEZVOUS_TOPIC, 4);
+    assert!(inbox.is_ok(), "{:?}", inbox.err());
+    drop(inbox);
+    drop(topics);
+    assert!(!pubsub.exists() && !event.exists(), "the topic is removed when its last user leaves");
+}

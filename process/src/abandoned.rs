@@ -1,0 +1,146 @@
+//! Services whose creator died while creating them.
+//!
+//! iceoryx2 (0.10) creates a service by first writing its static file, owner
+//! read-write, and then marking it read-only once the service is whole. A process
+//! killed between the two leaves a file every later opener reads as "being
+//! created" (`HangsInCreation`) for good, and iceoryx2's cleanup of dead nodes
+//! skips it: the service name is unusable until someone deletes the file by hand.
+//! A link or daemon restarted after a `kill -9` at start-up would fail forever.
+//!
+//! The creator writes a service tag in its node's directory before the static
+//! file, and the cleanup of a dead node removes its tags. So after that cleanup, a
+//! static file still being created with no tag in any node's directory has no
+//! living creator, and removing it lets the next open create the service afresh.
+
+use iceoryx2::node::Node;
+use iceoryx2::service::Service;
+use iceoryx2::service::messaging_pattern::MessagingPattern;
+use iceoryx2::service::service_hash::ServiceHash;
+use iceoryx2::service::service_name::ServiceName;
+use std::io;
+use std::os::unix::fs::PermissionsExt;
+use std::path::PathBuf;
+
+/// The permissions of a static file still being created (iceoryx2's
+/// `INIT_PERMISSIONS`); a finished one is read-only.
+const BEING_CREATED: u32 = 0o600;
+
+/// Removes the static file of service `name` (`pattern`) if its creator died
+/// before finishing it. Cleans up dead nodes first, so a dead creator's tag is gone.
+/// Returns whether a file was removed; a service being created by a living
+/// process, a finished one or a missing one are left alone.
+pub fn remove_abandoned_creation<S: Service>(
+    node: &Node<S>,
+    name: &ServiceName,
+    pattern: MessagingPattern,
+) -> io::Result<bool> {
+    node.try_cleanup_dead_nodes();
+    let global = &node.config().global;
+    let hash = ServiceHash::new::<S::ServiceNameHasher>(name, pattern);
+    let prefix = global.prefix.to_string();
+    let file_name = |suffix: &dyn std::fmt::Display| format!("{prefix}{}{suffix}", hash.as_str());
+    let static_file =
+        PathBuf::from(global.service_dir().to_string()).join(file_name(&global.service.static_config_storage_suffix));
+    let metadata = match std::fs::metadata(&static_file) {
+        Ok(m) => m,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(false),
+        Err(e) => return Err(e),
+    };
+    if !metadata.is_file() || metadata.permissions().mode() & 0o777 != BEING_CREATED {
+        return Ok(false);
+    }
+    let tag = file_name(&global.node.service_tag_suffix);
+    let nodes = match std::fs::read_dir(global.node_dir().to_string()) {
+        Ok(nodes) => nodes,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return remove(&static_file),
+        Err(e) => return Err(e),
+    };
+    for node_dir in nodes {
+        if node_dir?.path().join(&tag).exists() {
+            return Ok(false);
+        }
+    }
+    remove(&static_file)
+}
+
+fn remove(file: &std::path::Path) -> io::Result<bool> {
+    match std::fs::remove_file(file) {
+        Ok(()) => Ok(true),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(false),
+        Err(e) => Err(e),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use iceoryx2::prelude::*;
+    use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+    use std::fs::{File, Permissions};
+
+    type Ipc = iceoryx2::service::ipc::Service;
+
+    fn node(domain: &str) -> Node<Ipc> {
+        let mut config = iceoryx2::config::Config::default();
+        config.global.prefix = iceoryx2::prelude::FileName::new(domain.as_bytes()).unwrap();
+        NodeBuilder::new().config(&config).create::<Ipc>().unwrap()
+    }
+
+    /// The file a process killed while creating `name` leaves behind.
+    fn leave_half_created(node: &Node<Ipc>, name: &ServiceName, pattern: MessagingPattern) -> PathBuf {
+        let global = &node.config().global;
+        let hash = ServiceHash::new::<<Ipc as Service>::ServiceNameHasher>(name, pattern);
+        let dir = PathBuf::from(global.service_dir().to_string());
+        std::fs::create_dir_all(&dir).unwrap();
+        let file =
+            dir.join(format!("{}{}{}", global.prefix, hash.as_str(), global.service.static_config_storage_suffix));
+        File::create(&file).unwrap();
+        std::fs::set_permissions(&file, Permissions::from_mode(BEING_CREATED)).unwrap();
+        file
+    }
+
+    #[test]
+    fn a_service_whose_creator_died_is_created_afresh() {
+        let domain = format!("abandon{}", std::process::id());
+        let node = node(&domain);
+        let name = ServiceName::new("dyfos-test/abandoned").unwrap();
+        let file = leave_half_created(&node, &name, MessagingPattern::Event);
+        let hangs = node.service_builder(&name).event().open_or_create();
+        assert!(
+            matches!(hangs, Err(EventOpenOrCreateError::EventOpenError(EventOpenError::HangsInCreation))),
+            "{hangs:?}"
+        );
+        assert!(remove_abandoned_creation(&node, &name, MessagingPattern::Event).unwrap());
+        assert!(!file.exists());
+        let service = node.service_builder(&name).event().open_or_create();
+        assert!(service.is_ok(), "{service:?}");
+        // A finished service is left alone.
+        assert!(!remove_abandoned_creation(&node, &name, MessagingPattern::Event).unwrap());
+        assert!(node.service_builder(&name).event().open().is_ok());
+    }
+
+    #[test]
+    fn a_service_a_living_node_is_creating_is_left_alone() {
+        let domain = format!("creating{}", std::process::id());
+        let node = node(&domain);
+        let name = ServiceName::new("dyfos-test/being-created").unwrap();
+        let file = leave_half_created(&node, &name, MessagingPattern::PublishSubscribe);
+        // The living creator's tag, written before the static file.
+        let global = &node.config().global;
+        let hash = ServiceHash::new::<<Ipc as Service>::ServiceNameHasher>(&name, MessagingPattern::PublishSubscribe);
+        let node_dir = std::fs::read_dir(global.node_dir().to_string())
+            .unwrap()
+            .map(|d| d.unwrap().path())
+            .find(|d| d.join(format!("{}node{}", global.prefix, global.node.static_config_suffix)).exists())
+            .expect("the living node's directory");
+        let tag = node_dir.join(format!("{}{}{}", global.prefix, hash.as_str(), global.node.service_tag_suffix));
+        File::create(&tag).unwrap();
+        assert!(!remove_abandoned_creation(&node, &name, MessagingPattern::PublishSubscribe).unwrap());
+        assert!(file.exists());
+        // The same file for the other pattern is another service.
+        assert!(!remove_abandoned_creation(&node, &name, MessagingPattern::Event).unwrap());
+        std::fs::remove_file(&tag).unwrap();
+        assert!(remove_abandoned_creation(&node, &name, MessagingPattern::PublishSubscribe).unwrap());
+        assert!(!file.exists());
+    }
+}
