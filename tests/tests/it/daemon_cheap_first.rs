@@ -125,7 +125,7 @@ fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
     let _daemon = sandbox.start_daemon(&["--workers", "2"]);
     let mut admin = sandbox.client();
     admin.upload_map(1, &slow_world(), false, PATIENCE).unwrap();
-    let example = Scenario::from_json(&std::fs::read_to_string(dyfos_tests::data("example.json")).unwrap()).unwrap();
+    let example = dyfos_tests::scenario("example.json");
     admin.upload_map(2, &example.world, false, PATIENCE).unwrap();
 
     let greedy = RawClient::open(&sandbox);
