@@ -8,7 +8,7 @@
 //! `target/<profile>/deps/`; `dyfosd` and `dyfos` from `dyfos_tests::bin`, which
 //! builds them if they are missing.
 
-use dyfos_tests::{Sandbox, bin, data};
+use dyfos_tests::{Sandbox, Scratch, bin, data};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -25,24 +25,6 @@ fn lib_dir() -> PathBuf {
         assert!(deps.join(lib).exists(), "{} is missing: run `cargo build -p dyfos-ffi`", deps.join(lib).display());
     }
     deps
-}
-
-/// A scratch directory, removed on drop.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Scratch {
-        let dir = std::env::temp_dir().join(format!("dyfos-ffi-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("scratch dir");
-        Scratch(dir)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 fn run(cmd: &mut Command) -> Output {
@@ -124,7 +106,7 @@ fn without_micros_line(text: &str) -> String {
 
 #[test]
 fn the_c_and_cpp_examples_print_what_dyfos_solve_prints() {
-    let scratch = Scratch::new("examples");
+    let scratch = Scratch::new("ffi-examples");
     let prefix = scratch.0.join("prefix");
     install(&prefix);
     let examples = crate_dir().join("examples");
@@ -226,7 +208,7 @@ fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String
 
 #[test]
 fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
-    let scratch = Scratch::new("check-c");
+    let scratch = Scratch::new("ffi-check-c");
     let prefix = scratch.0.join("prefix");
     install(&prefix);
     let program = scratch.0.join("ffi_check");
@@ -284,7 +266,7 @@ fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
 
 #[test]
 fn the_cpp_wrapper_answers_like_dyfos_solve_and_throws_each_family() {
-    let scratch = Scratch::new("check-cpp");
+    let scratch = Scratch::new("ffi-check-cpp");
     let prefix = scratch.0.join("prefix");
     install(&prefix);
     let program = scratch.0.join("cpp_check");
@@ -310,7 +292,7 @@ fn dynamic_section(file: &Path) -> String {
 /// still works after it is moved (pkg-config's prefix comes from where dyfos.pc lies).
 #[test]
 fn the_installed_library_has_a_soname_and_a_relocatable_pkg_config_file() {
-    let scratch = Scratch::new("relocate");
+    let scratch = Scratch::new("ffi-relocate");
     let first = scratch.0.join("first");
     run(Command::new("bash").arg(crate_dir().join("install.sh")).arg("--lib-dir").arg(lib_dir()).arg(&first));
     let soname = format!("libdyfos.so.{}", dyfos::DYFOS_ABI_VERSION);
@@ -346,7 +328,7 @@ fn the_installed_library_has_a_soname_and_a_relocatable_pkg_config_file() {
 /// replace the workspace's), so a `cargo` that fails does not matter.
 #[test]
 fn install_takes_the_built_library_without_running_cargo() {
-    let scratch = Scratch::new("no-rebuild");
+    let scratch = Scratch::new("ffi-no-rebuild");
     let target = scratch.0.join("target");
     let release = target.join("release");
     std::fs::create_dir_all(&release).expect("release dir");
@@ -392,7 +374,7 @@ fn install_takes_the_built_library_without_running_cargo() {
 #[test]
 #[ignore = "needs cmake: run client/ffi/test.sh --cmake"]
 fn the_cmake_package_finds_the_library() {
-    let scratch = Scratch::new("cmake");
+    let scratch = Scratch::new("ffi-cmake");
     let prefix = scratch.0.join("prefix");
     install(&prefix);
     let app = scratch.0.join("app");

@@ -10,31 +10,13 @@
 use dyfos_client::prelude::*;
 use dyfos_service::daemon::record::topics;
 use dyfos_tests::soak::{WRITER_MAP, maps, plan, writer_batch};
-use dyfos_tests::{PATIENCE, Sandbox, bin, wait_for};
+use dyfos_tests::{PATIENCE, Sandbox, Scratch, bin, wait_for};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 use std::sync::{Arc, Mutex};
 
 const TIMEOUT: std::time::Duration = PATIENCE;
-
-/// A fresh folder for recordings, removed on drop.
-struct Dir(PathBuf);
-
-impl Dir {
-    fn new(test: &str) -> Dir {
-        let dir = std::env::temp_dir().join(format!("dyfos-record-{test}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("recording folder");
-        Dir(dir)
-    }
-}
-
-impl Drop for Dir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 /// What the clients got back, by what the recording should hold.
 #[derive(Debug, Default)]
@@ -199,7 +181,7 @@ fn drive(sandbox: &Sandbox, per_client: u64) -> Sent {
 #[test]
 fn a_recorded_run_replays_identically_and_a_changed_parameter_shows() {
     let sandbox = Sandbox::new("record");
-    let dir = Dir::new("replay");
+    let dir = Scratch::new("record-replay");
     let file = dir.0.join("traffic.mcap");
     let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", file.to_str().unwrap()]);
     let sent = drive(&sandbox, 10);
@@ -280,7 +262,7 @@ fn a_recorded_run_replays_identically_and_a_changed_parameter_shows() {
 #[test]
 fn a_killed_recording_daemon_leaves_readable_rotated_files() {
     let sandbox = Sandbox::new("record-kill");
-    let dir = Dir::new("kill");
+    let dir = Scratch::new("record-kill");
     let file = dir.0.join("field.mcap");
     // Two workers: the recording's order is still the order the client saw its
     // answers in (a query is recorded before its reply is sent), so the last one on
@@ -488,7 +470,7 @@ fn rewrite_in_old_spelling(from: &Path, to: &Path) -> usize {
 #[test]
 fn a_recording_in_the_old_delta_spelling_still_replays() {
     let sandbox = Sandbox::new("record-old");
-    let dir = Dir::new("old");
+    let dir = Scratch::new("record-old");
     let first = dir.0.join("first.mcap");
     let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", first.to_str().unwrap()]);
     drive(&sandbox, 6);
