@@ -195,7 +195,22 @@ impl Sandbox {
     /// Starts `dyfosd` for this sandbox (no flags), connects a client and uploads
     /// `world` as map `map` through it.
     pub fn start_serving(&self, map: dyfos_shared::wire::map::MapId, world: &World) -> (DaemonProcess, Client) {
-        let daemon = self.start_daemon(&[]);
+        self.start_serving_with(&[], map, world)
+    }
+
+    /// A daemon with two workers (so one `brute` search may take both) and the world
+    /// of [`slow_search_scenario`] as map 1, and a client.
+    pub fn start_slow(&self) -> (DaemonProcess, Client) {
+        self.start_serving_with(&["--workers", "2"], 1, &slow_search_scenario().world)
+    }
+
+    fn start_serving_with(
+        &self,
+        flags: &[&str],
+        map: dyfos_shared::wire::map::MapId,
+        world: &World,
+    ) -> (DaemonProcess, Client) {
+        let daemon = self.start_daemon(flags);
         let mut client = self.client();
         client.upload_map(map, world, false, PATIENCE).expect("upload the test map");
         (daemon, client)
