@@ -78,6 +78,16 @@ fn ipc(e: impl std::error::Error + Send + Sync + 'static) -> CallError {
     CallError::Ipc(IpcFailure::new(e))
 }
 
+/// Refuses locally (`OverCapacity`, as the daemon would) `n` records of `what` over
+/// `limit`; `advice` ends the message.
+fn at_most(n: usize, limit: usize, what: &str, advice: &str) -> Result<(), CallError> {
+    if n > limit {
+        let detail = format!("{n} {what} exceed the limit of {limit}{advice}");
+        return Err(CallError::Local(Rejection::new(Status::OverCapacity, detail)));
+    }
+    Ok(())
+}
+
 /// A request just sent: on which service, and how long to wait for its reply.
 #[derive(Clone, Copy)]
 struct Sent<'a> {
@@ -428,15 +438,7 @@ impl Client {
             )));
         }
         let records = request.records();
-        if records.len() > MAX_INLINE_DELTAS {
-            return Err(CallError::Local(Rejection::new(
-                Status::OverCapacity,
-                format!(
-                    "{} inline delta records exceed the limit of {MAX_INLINE_DELTAS}; apply them with Client::apply first",
-                    records.len()
-                ),
-            )));
-        }
+        at_most(records.len(), MAX_INLINE_DELTAS, "inline delta records", "; apply them with Client::apply first")?;
         self.with_connection(timeout, |conn, id, config, names, interrupt| {
             let pending = send_records(&conn.rendezvous, request.header(mode, id, conn.reply_to), &records)?;
             let sent = Sent { service: &names.rendezvous, names, config, timeout };
@@ -472,15 +474,8 @@ impl Client {
         timeout: Duration,
     ) -> Result<(MapReplyHeader, Vec<WireDelta>), CallError> {
         let records = request.records();
-        if records.len() > MAX_DELTAS_PER_MESSAGE {
-            return Err(CallError::Local(Rejection::new(
-                Status::OverCapacity,
-                format!(
-                    "{} delta records exceed the limit of {MAX_DELTAS_PER_MESSAGE} per message; split the batch or upload the whole map",
-                    records.len()
-                ),
-            )));
-        }
+        let advice = " per message; split the batch or upload the whole map";
+        at_most(records.len(), MAX_DELTAS_PER_MESSAGE, "delta records", advice)?;
         let (reply, records) = self.with_connection(timeout, |conn, id, config, names, interrupt| {
             let pending = send_records(&conn.map, request.header(id, conn.reply_to), &records)?;
             let sent = Sent { service: &names.map, names, config, timeout };
@@ -723,6 +718,16 @@ fn unique_u64(salt: u64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn too_many_records_are_refused_locally_with_advice() {
+        assert_eq!(at_most(3, 3, "delta records", ""), Ok(()));
+        let Err(CallError::Local(r)) = at_most(4, 3, "inline delta records", "; apply them first") else {
+            panic!("four records over a limit of three were not refused")
+        };
+        assert_eq!(r.status, Status::OverCapacity);
+        assert_eq!(r.message, "4 inline delta records exceed the limit of 3; apply them first");
+    }
 
     #[test]
     fn request_ids_of_two_clients_do_not_start_alike() {
