@@ -737,7 +737,7 @@ impl GrowingPath {
         self.points.push((ns, point));
         let arrived = self.driving && phase != Phase::Driving;
         self.driving = phase == Phase::Driving;
-        (i % PATH_EVERY == 0 || arrived || i + 1 == self.samples).then(|| Message::Path(self.points.clone()))
+        (i.is_multiple_of(PATH_EVERY) || arrived || i + 1 == self.samples).then(|| Message::Path(self.points.clone()))
     }
 }
 
