@@ -150,16 +150,24 @@ struct AtKill {
     list: Option<String>,
 }
 
-/// Runs `program SCENARIO PREFIX DOMAIN` against a fresh daemon as the checks in
-/// `tests/c/` expect: their `--- SECTION` output is returned; at `--- kill` the
-/// daemon's snapshot of the named map and its list of maps are taken with `dyfos`,
-/// the daemon is killed, and the program told to go on.
-fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String, String)>, AtKill) {
+/// Builds the check `tests/c/SOURCE` against an installed tree and runs it as
+/// `program SCENARIO PREFIX DOMAIN`, on the example scenario, against a fresh daemon
+/// (sandbox `ffi-NAME`) as the checks expect: their `--- SECTION` output is returned;
+/// at `--- kill` the daemon's snapshot of the named map and its list of maps are
+/// taken with `dyfos`, the daemon is killed, and the program told to go on.
+fn run_check(source: &str, name: &str) -> (Vec<(String, String)>, AtKill) {
+    let scratch = Scratch::new(&format!("ffi-check-{name}"));
+    let prefix = scratch.0.join("prefix");
+    install(&prefix);
+    let program = scratch.0.join(format!("check-{name}"));
+    compile(&prefix, &crate_dir().join("tests/c").join(source), &program, Link::Shared);
+    let sandbox = Sandbox::new(&format!("ffi-{name}"));
+    let scenario = data("example.json");
     let mut daemon = sandbox.start_daemon(&[]);
-    let mut child = Command::new(program)
+    let mut child = Command::new(&program)
         .env("DYFOS_TEST_OCTOMAP", data("octomap/geb079.bt"))
         .env("DYFOS_TEST_DELTAS", data("deltas-every-kind.json"))
-        .arg(scenario)
+        .arg(&scenario)
         .args([&sandbox.prefix, &sandbox.domain])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
@@ -208,14 +216,8 @@ fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String
 
 #[test]
 fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
-    let scratch = Scratch::new("ffi-check-c");
-    let prefix = scratch.0.join("prefix");
-    install(&prefix);
-    let program = scratch.0.join("ffi_check");
-    compile(&prefix, &crate_dir().join("tests/c/ffi_check.c"), &program, Link::Shared);
-    let sandbox = Sandbox::new("ffi-c");
+    let (sections, at_kill) = run_check("ffi_check.c", "c");
     let scenario = data("example.json");
-    let (sections, at_kill) = run_check(&program, &scenario, &sandbox);
     let mut compared = 0;
     for (name, text) in &sections {
         if let Some(rest) = name.strip_prefix("answer ") {
@@ -266,14 +268,8 @@ fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
 
 #[test]
 fn the_cpp_wrapper_answers_like_dyfos_solve_and_throws_each_family() {
-    let scratch = Scratch::new("ffi-check-cpp");
-    let prefix = scratch.0.join("prefix");
-    install(&prefix);
-    let program = scratch.0.join("cpp_check");
-    compile(&prefix, &crate_dir().join("tests/c/cpp_check.cpp"), &program, Link::Shared);
-    let sandbox = Sandbox::new("ffi-cpp");
+    let (sections, _) = run_check("cpp_check.cpp", "cpp");
     let scenario = data("example.json");
-    let (sections, _) = run_check(&program, &scenario, &sandbox);
     let answers: Vec<_> = sections.iter().filter(|(n, _)| n.starts_with("answer ")).collect();
     assert_eq!(answers.len(), 2, "{sections:?}");
     for (name, text) in answers {
