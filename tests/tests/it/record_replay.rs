@@ -81,6 +81,15 @@ fn text(o: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
 
+/// [`drive`] against a daemon with two workers recording to `file`, stopped cleanly
+/// after it.
+fn record(sandbox: &Sandbox, file: &Path, per_client: u64) -> Sent {
+    let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", file.to_str().unwrap()]);
+    let sent = drive(sandbox, per_client);
+    assert!(daemon.terminate().success(), "{}", daemon.log());
+    sent
+}
+
 /// The mix: three query clients on three maps (two uploaded, one created and
 /// changed by a writer between the queries, also inline).
 fn drive(sandbox: &Sandbox, per_client: u64) -> Sent {
@@ -183,9 +192,7 @@ fn a_recorded_run_replays_identically_and_a_changed_parameter_shows() {
     let sandbox = Sandbox::new("record");
     let dir = Scratch::new("record-replay");
     let file = dir.0.join("traffic.mcap");
-    let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", file.to_str().unwrap()]);
-    let sent = drive(&sandbox, 10);
-    assert!(daemon.terminate().success(), "{}", daemon.log());
+    let sent = record(&sandbox, &file, 10);
 
     let messages = read_complete(&file);
     let count = |t: &str| messages.get(t).map_or(0, Vec::len) as u64;
@@ -472,9 +479,7 @@ fn a_recording_in_the_old_delta_spelling_still_replays() {
     let sandbox = Sandbox::new("record-old");
     let dir = Scratch::new("record-old");
     let first = dir.0.join("first.mcap");
-    let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", first.to_str().unwrap()]);
-    drive(&sandbox, 6);
-    assert!(daemon.terminate().success(), "{}", daemon.log());
+    record(&sandbox, &first, 6);
     // The maps are kept in the state directory: the next file starts with them.
     let second = dir.0.join("second.mcap");
     let mut daemon = sandbox.start_daemon_logging("info", &["--record", second.to_str().unwrap()]);
