@@ -22,6 +22,7 @@
 use crate::numerical::{NumericalConfig, numerical_map, numerical_maps, voxelized};
 use crate::octomap::{Building, RESOLUTION};
 use crate::stats::quantile_sorted;
+use crate::table::{self, Align};
 use anyhow::{Context, bail};
 use dyfos_service::learned::load_model;
 use dyfos_service::lupp::{Evaluation, Lupp};
@@ -524,29 +525,24 @@ impl Comparison {
         for (model, floor) in &self.floors {
             let _ = writeln!(out, "floor ({}): {floor:.4} µs per evaluation of a feasible candidate", model.name());
         }
-        let _ = writeln!(
-            out,
-            "\n| algorithm | maps | model | queries | baseline µs | new µs | ratio | median query ratio | evaluations | × floor (new / base) | answers |\n\
-             |---|---|---|---:|---:|---:|---:|---:|---:|---:|---|"
-        );
+        out.push('\n');
+        let (l, r) = (Align::Left, Align::Right);
+        let columns = [("algorithm", l), ("maps", l), ("model", l), ("queries", r), ("baseline µs", r), ("new µs", r)];
+        let more =
+            [("ratio", r), ("median query ratio", r), ("evaluations", r), ("× floor (new / base)", r), ("answers", l)];
+        table::header(&mut out, &[&columns[..], &more].concat());
         for g in &self.groups {
             let floor = match (g.new_floor_multiple, g.baseline_floor_multiple) {
                 (Some(n), Some(b)) => format!("{n:.1} / {b:.1}"),
                 _ => "–".into(),
             };
             let answers = if g.identical { "identical".to_string() } else { format!("{} DIFFER", g.differing) };
-            let _ = writeln!(
-                out,
-                "| {} | {} | {} | {} | {:.0} | {:.0} | {:.2} | {:.2} | {:.0} | {floor} | {answers} |",
-                g.algorithm,
-                g.kind.name(),
-                g.model.name(),
-                g.queries,
-                g.baseline_micros,
-                g.new_micros,
-                g.ratio,
-                g.median_query_ratio,
-                g.evaluations
+            let cells = [g.algorithm.clone(), g.kind.name().into(), g.model.name().into(), g.queries.to_string()];
+            let numbers = [g.baseline_micros, g.new_micros].map(|v| format!("{v:.0}"));
+            let ratios = [g.ratio, g.median_query_ratio].map(|v| format!("{v:.2}"));
+            table::row(
+                &mut out,
+                &[&cells[..], &numbers, &ratios, &[format!("{:.0}", g.evaluations), floor, answers]].concat(),
             );
         }
         let differing: usize = self.groups.iter().map(|g| g.differing).sum();

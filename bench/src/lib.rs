@@ -32,3 +32,4 @@ pub mod octomap;
 pub mod scaling;
 pub mod stats;
 pub mod svg;
+pub mod table;

@@ -13,27 +13,20 @@
 use dyfos_client::prelude::*;
 use std::time::{Duration, Instant};
 
+mod common;
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let arg = |i: usize| args.get(i).filter(|a| !a.is_empty());
     let count: usize = arg(2).map_or(Ok(2000), |a| a.parse())?;
     let poll_us: u64 = arg(3).map_or(Ok(200), |a| a.parse())?;
     let gap_us: u64 = arg(4).map_or(Ok(0), |a| a.parse())?;
-    let config = ClientConfig {
-        prefix: arg(0).cloned().unwrap_or_else(|| dyfos_client::DEFAULT_PREFIX.to_string()),
-        domain: arg(1).cloned(),
-        poll: Duration::from_micros(poll_us),
-        ..ClientConfig::default()
-    };
+    let config =
+        ClientConfig { poll: Duration::from_micros(poll_us), ..common::config(arg(0).cloned(), arg(1).cloned()) };
     let mut client = Client::connect(&config)?;
     let timeout = Duration::from_secs(5);
     let map: MapId = 0xC0FFEE;
-    let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0])?;
-    match client.create_map(map, bounds, Sun::new(0.7, 2.1)?, timeout) {
-        Ok(_) => {}
-        Err(e) if e.status() == Some(Status::MapExists) => {}
-        Err(e) => return Err(e.into()),
-    }
+    common::create_map(&mut client, map, timeout)?;
     let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]])?;
     let request = RendezvousRequest::new(map, belief);
     for _ in 0..100 {

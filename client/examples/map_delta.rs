@@ -9,23 +9,14 @@ use dyfos_client::prelude::*;
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
 use std::time::Duration;
 
+mod common;
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
-    let config = ClientConfig {
-        prefix: args.next().unwrap_or_else(|| dyfos_client::DEFAULT_PREFIX.to_string()),
-        domain: args.next(),
-        ..ClientConfig::default()
-    };
-    let mut client = Client::connect(&config)?;
+    let mut client = Client::connect(&common::config(args.next(), args.next()))?;
     let timeout = Duration::from_secs(5);
     let map: MapId = 42;
-
-    let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0])?;
-    match client.create_map(map, bounds, Sun::new(0.7, 2.1)?, timeout) {
-        Ok(_) => {}
-        Err(e) if e.status() == Some(Status::MapExists) => {}
-        Err(e) => return Err(e.into()),
-    }
+    common::create_map(&mut client, map, timeout)?;
     let version = client.snapshot(map, timeout)?.version();
 
     // A newly seen pole and crate, and the sun moved: one batch, one version each.

@@ -11,28 +11,20 @@
 use dyfos_client::prelude::*;
 use std::time::Duration;
 
+mod common;
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
-    let config = ClientConfig {
-        prefix: args.next().unwrap_or_else(|| dyfos_client::DEFAULT_PREFIX.to_string()),
-        domain: args.next(),
-        ..ClientConfig::default()
-    };
-    let mut client = Client::connect(&config)?;
+    let mut client = Client::connect(&common::config(args.next(), args.next()))?;
     let timeout = Duration::from_secs(5);
 
-    let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0])?;
-    match client.create_map(1, bounds, Sun::new(0.7, 2.1)?, timeout) {
-        Ok(_) => {
-            let pole = Obstacle::Cylinder(dyfos_shared::world::VerticalCylinder {
-                center: na::Point2::new(2.0, 1.0),
-                radius: 0.5,
-                height: 10.0,
-            });
-            client.apply(1, Some(0), &[MapDelta::UpsertObstacle { id: 1, obstacle: pole }], timeout)?;
-        }
-        Err(e) if e.status() == Some(Status::MapExists) => {}
-        Err(e) => return Err(e.into()),
+    if common::create_map(&mut client, 1, timeout)? {
+        let pole = Obstacle::Cylinder(dyfos_shared::world::VerticalCylinder {
+            center: na::Point2::new(2.0, 1.0),
+            radius: 0.5,
+            height: 10.0,
+        });
+        client.apply(1, Some(0), &[MapDelta::UpsertObstacle { id: 1, obstacle: pole }], timeout)?;
     }
 
     let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]])?;

@@ -26,17 +26,13 @@ root="$(cd "$here/../.." && pwd)"
 source "$root/scripts/venv.sh"
 target="${CARGO_TARGET_DIR:-$root/target}"
 venv="$target/py-venv"
-python="${PYTHON:-python3}"
 maturin=0
 if [ "${1:-}" = "--maturin" ]; then
     maturin=1
     shift
 fi
 
-make_venv "$python" "$venv"
-if ! "$venv/bin/python" -c "import pytest, numpy" 2>/dev/null; then
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "pytest>=7" numpy
-fi
+venv_with "$venv" "pytest, numpy" "pytest>=7" numpy
 if [ "$maturin" = 1 ] && [ ! -x "$venv/bin/maturin" ]; then
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "maturin>=1.9.4,<2"
 fi

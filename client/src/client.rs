@@ -14,12 +14,15 @@ use dyfos_shared::wire::services::{self, BadServiceName, InvalidDomain, Ipc, Ser
 use dyfos_shared::wire::stats::{DaemonStats, StatsReply, StatsRequest};
 use dyfos_shared::wire::{DEFAULT_PREFIX, Rejection, ServiceNames, Status, split_u128};
 use dyfos_shared::world::{Bounds, MapDelta, Sun, World};
+use iceoryx2::pending_response::PendingResponse;
+use iceoryx2::port::ReceiveError;
 use iceoryx2::port::client::Client as ClientPort;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::request_response::RequestResponseOpenError;
+use std::fmt::Debug;
 use std::time::{Duration, Instant};
 
 type RendezvousPort = ClientPort<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
@@ -75,16 +78,43 @@ fn ipc(e: impl std::error::Error + Send + Sync + 'static) -> CallError {
     CallError::Ipc(IpcFailure::new(e))
 }
 
-/// `NoDaemon` if a request sent on `service` reached no server (`connections` 0).
-fn unserved(connections: usize, service: &str, names: &ServiceNames, config: &ClientConfig) -> Result<(), CallError> {
-    if connections == 0 {
-        return Err(CallError::NoDaemon {
-            service: service.to_string(),
-            prefix: names.prefix.clone(),
-            domain: config.domain.clone(),
-        });
+/// Refuses locally (`OverCapacity`, as the daemon would) `n` records of `what` over
+/// `limit`; `advice` ends the message.
+fn at_most(n: usize, limit: usize, what: &str, advice: &str) -> Result<(), CallError> {
+    if n > limit {
+        let detail = format!("{n} {what} exceed the limit of {limit}{advice}");
+        return Err(CallError::Local(Rejection::new(Status::OverCapacity, detail)));
     }
     Ok(())
+}
+
+/// A request just sent: on which service, and how long to wait for its reply.
+#[derive(Clone, Copy)]
+struct Sent<'a> {
+    service: &'a str,
+    names: &'a ServiceNames,
+    config: &'a ClientConfig,
+    timeout: Duration,
+}
+
+/// A reply waited for on a [`PendingResponse`].
+type Pending<Req, ReqH, Res, ResH> = PendingResponse<Ipc, Req, ReqH, Res, ResH>;
+
+/// Sends `records` under `header` on one of the ports whose request is a header and
+/// delta records (rendezvous, map).
+fn send_records<H, Res, ResH>(
+    port: &ClientPort<Ipc, [WireDelta], H, Res, ResH>,
+    header: H,
+    records: &[WireDelta],
+) -> Result<Pending<[WireDelta], H, Res, ResH>, CallError>
+where
+    H: Default + Debug + ZeroCopySend,
+    Res: Debug + IceoryxSend + ?Sized,
+    ResH: Debug + ZeroCopySend,
+{
+    let mut loan = port.loan_slice_uninit(records.len()).map_err(ipc)?;
+    *loan.user_header_mut() = header;
+    loan.write_from_slice(records).send().map_err(ipc)
 }
 
 fn open_ipc(e: impl std::error::Error + Send + Sync + 'static) -> ClientOpenError {
@@ -180,6 +210,37 @@ impl Connection {
             idle: IdleCores::of_this_machine(),
             node,
         })))
+    }
+
+    /// Waits for the reply to `pending` that `receive` keeps: `NoDaemon` if no server
+    /// got the request, else as [`Connection::await_reply`].
+    fn await_pending<Req, ReqH, Res, ResH, T>(
+        &self,
+        pending: &Pending<Req, ReqH, Res, ResH>,
+        sent: Sent,
+        interrupt: &mut Interrupt,
+        mut receive: impl FnMut(&Pending<Req, ReqH, Res, ResH>) -> Result<Option<T>, ReceiveError>,
+    ) -> Result<T, CallError>
+    where
+        Req: Debug + IceoryxSend + ?Sized,
+        ReqH: Debug + ZeroCopySend,
+        Res: Debug + IceoryxSend + ?Sized,
+        ResH: Debug + ZeroCopySend,
+    {
+        if pending.number_of_server_connections() == 0 {
+            return Err(CallError::NoDaemon {
+                service: sent.service.to_string(),
+                prefix: sent.names.prefix.clone(),
+                domain: sent.config.domain.clone(),
+            });
+        }
+        self.await_reply(
+            sent.config.poll,
+            sent.timeout,
+            interrupt,
+            || receive(pending).map_err(ipc),
+            || pending.is_connected(),
+        )
     }
 
     /// Waits for `receive` to yield a reply: busy-polls for `poll`, then sleeps on
@@ -377,28 +438,13 @@ impl Client {
             )));
         }
         let records = request.records();
-        if records.len() > MAX_INLINE_DELTAS {
-            return Err(CallError::Local(Rejection::new(
-                Status::OverCapacity,
-                format!(
-                    "{} inline delta records exceed the limit of {MAX_INLINE_DELTAS}; apply them with Client::apply first",
-                    records.len()
-                ),
-            )));
-        }
+        at_most(records.len(), MAX_INLINE_DELTAS, "inline delta records", "; apply them with Client::apply first")?;
         self.with_connection(timeout, |conn, id, config, names, interrupt| {
-            let header = request.header(mode, id, conn.reply_to);
-            let mut loan = conn.rendezvous.loan_slice_uninit(records.len()).map_err(ipc)?;
-            *loan.user_header_mut() = header;
-            let pending = loan.write_from_slice(&records).send().map_err(ipc)?;
-            unserved(pending.number_of_server_connections(), &names.rendezvous, names, config)?;
-            conn.await_reply(
-                config.poll,
-                timeout,
-                interrupt,
-                || Ok(pending.receive().map_err(ipc)?.map(|r| *r.payload()).filter(|r| r.request_id == id)),
-                || pending.is_connected(),
-            )
+            let pending = send_records(&conn.rendezvous, request.header(mode, id, conn.reply_to), &records)?;
+            let sent = Sent { service: &names.rendezvous, names, config, timeout };
+            conn.await_pending(&pending, sent, interrupt, |p| {
+                Ok(p.receive()?.map(|r| *r.payload()).filter(|r| r.request_id == id))
+            })
         })
     }
 
@@ -428,32 +474,16 @@ impl Client {
         timeout: Duration,
     ) -> Result<(MapReplyHeader, Vec<WireDelta>), CallError> {
         let records = request.records();
-        if records.len() > MAX_DELTAS_PER_MESSAGE {
-            return Err(CallError::Local(Rejection::new(
-                Status::OverCapacity,
-                format!(
-                    "{} delta records exceed the limit of {MAX_DELTAS_PER_MESSAGE} per message; split the batch or upload the whole map",
-                    records.len()
-                ),
-            )));
-        }
+        let advice = " per message; split the batch or upload the whole map";
+        at_most(records.len(), MAX_DELTAS_PER_MESSAGE, "delta records", advice)?;
         let (reply, records) = self.with_connection(timeout, |conn, id, config, names, interrupt| {
-            let header = request.header(id, conn.reply_to);
-            let mut loan = conn.map.loan_slice_uninit(records.len()).map_err(ipc)?;
-            *loan.user_header_mut() = header;
-            let pending = loan.write_from_slice(&records).send().map_err(ipc)?;
-            unserved(pending.number_of_server_connections(), &names.map, names, config)?;
-            conn.await_reply(
-                config.poll,
-                timeout,
-                interrupt,
-                || {
-                    let Some(r) = pending.receive().map_err(ipc)? else { return Ok(None) };
-                    let header = *r.user_header();
-                    Ok((header.request_id == id).then(|| (header, r.payload().to_vec())))
-                },
-                || pending.is_connected(),
-            )
+            let pending = send_records(&conn.map, request.header(id, conn.reply_to), &records)?;
+            let sent = Sent { service: &names.map, names, config, timeout };
+            conn.await_pending(&pending, sent, interrupt, |p| {
+                let Some(r) = p.receive()? else { return Ok(None) };
+                let header = *r.user_header();
+                Ok((header.request_id == id).then(|| (header, r.payload().to_vec())))
+            })
         })?;
         if reply.status != Status::Ok as u32 {
             return Err(CallError::Rejected(Rejection::from_wire(reply.status, &reply.detail, reply.error_index)));
@@ -655,14 +685,10 @@ impl Client {
         let reply = self.with_connection(timeout, |conn, id, config, names, interrupt| {
             let request = StatsRequest { request_id: id, reply_to: conn.reply_to };
             let pending = conn.stats.send_copy(request).map_err(ipc)?;
-            unserved(pending.number_of_server_connections(), &names.stats, names, config)?;
-            conn.await_reply(
-                config.poll,
-                timeout,
-                interrupt,
-                || Ok(pending.receive().map_err(ipc)?.map(|r| *r.payload()).filter(|r| r.request_id == id)),
-                || pending.is_connected(),
-            )
+            let sent = Sent { service: &names.stats, names, config, timeout };
+            conn.await_pending(&pending, sent, interrupt, |p| {
+                Ok(p.receive()?.map(|r| *r.payload()).filter(|r| r.request_id == id))
+            })
         })?;
         Ok(DaemonStats::from(&reply))
     }
@@ -692,6 +718,16 @@ fn unique_u64(salt: u64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn too_many_records_are_refused_locally_with_advice() {
+        assert_eq!(at_most(3, 3, "delta records", ""), Ok(()));
+        let Err(CallError::Local(r)) = at_most(4, 3, "inline delta records", "; apply them first") else {
+            panic!("four records over a limit of three were not refused")
+        };
+        assert_eq!(r.status, Status::OverCapacity);
+        assert_eq!(r.message, "4 inline delta records exceed the limit of 3; apply them first");
+    }
 
     #[test]
     fn request_ids_of_two_clients_do_not_start_alike() {

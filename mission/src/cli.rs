@@ -50,6 +50,17 @@ pub struct OutputArgs {
     pub mcap_profile: crate::eval::McapProfile,
 }
 
+impl OutputArgs {
+    /// What the flags ask to write.
+    pub fn config(&self) -> crate::mission::output::OutputConfig {
+        crate::mission::output::OutputConfig {
+            events: self.events.clone(),
+            mcap: self.mcap.clone(),
+            mcap_profile: self.mcap_profile,
+        }
+    }
+}
+
 /// `--NAME = v` as a wall-clock duration (seconds ≥ 0).
 pub fn seconds(name: &str, v: f64) -> anyhow::Result<Duration> {
     Duration::try_from_secs_f64(v).map_err(|_| anyhow::anyhow!("--{name} = {v} must be a number of seconds ≥ 0"))

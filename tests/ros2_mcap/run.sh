@@ -16,13 +16,8 @@ root="$(cd "$here/../.." && pwd)"
 source "$root/scripts/venv.sh"
 target="${CARGO_TARGET_DIR:-$root/target}"
 venv="$target/ros2-mcap-venv"
-python="${PYTHON:-python3}"
 
-make_venv "$python" "$venv"
-if ! "$venv/bin/python" -c "import pytest, mcap, mcap_ros2" 2>/dev/null; then
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check \
-        "pytest>=7" "mcap>=1.1,<2" "mcap-ros2-support>=0.5,<1"
-fi
+venv_with "$venv" "pytest, mcap, mcap_ros2" "pytest>=7" "mcap>=1.1,<2" "mcap-ros2-support>=0.5,<1"
 
 # The demo and the processes it starts (a no-op after scripts/test's build).
 (cd "$root" && cargo build --quiet --workspace --all-targets)

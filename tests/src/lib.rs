@@ -18,6 +18,7 @@ pub mod soak;
 
 use dyfos_client::{Client, ClientConfig};
 use dyfos_service::launch::DyfosdCommand;
+use dyfos_shared::world::World;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
 use std::sync::OnceLock;
@@ -191,6 +192,30 @@ impl Sandbox {
         self.start_daemon_logging("debug", extra)
     }
 
+    /// Starts `dyfosd` for this sandbox (no flags), connects a client and uploads
+    /// `world` as map `map` through it.
+    pub fn start_serving(&self, map: dyfos_shared::wire::map::MapId, world: &World) -> (DaemonProcess, Client) {
+        self.start_serving_with(&[], map, world)
+    }
+
+    /// A daemon with two workers (so one `brute` search may take both) and the world
+    /// of [`slow_search_scenario`] as map 1, and a client.
+    pub fn start_slow(&self) -> (DaemonProcess, Client) {
+        self.start_serving_with(&["--workers", "2"], 1, &slow_search_scenario().world)
+    }
+
+    fn start_serving_with(
+        &self,
+        flags: &[&str],
+        map: dyfos_shared::wire::map::MapId,
+        world: &World,
+    ) -> (DaemonProcess, Client) {
+        let daemon = self.start_daemon(flags);
+        let mut client = self.client();
+        client.upload_map(map, world, false, PATIENCE).expect("upload the test map");
+        (daemon, client)
+    }
+
     /// Starts `dyfosd` with `RUST_LOG=level` and waits until it answers.
     pub fn start_daemon_logging(&self, level: &str, extra: &[&str]) -> DaemonProcess {
         let log = self.state_dir.with_extension(format!("log-{}", NEXT.fetch_add(1, Ordering::Relaxed)));
@@ -350,6 +375,32 @@ pub use dyfos_process::child::KillOnDrop;
 /// The workspace's test data directory.
 pub fn data(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(path)
+}
+
+/// A fresh directory `dyfos-NAME-PID` under the system's temporary directory,
+/// removed on drop.
+pub struct Scratch(pub PathBuf);
+
+impl Scratch {
+    /// Makes the directory, empty (what an earlier run of the same name left is removed).
+    pub fn new(name: &str) -> Scratch {
+        let dir = std::env::temp_dir().join(format!("dyfos-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("scratch dir");
+        Scratch(dir)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// The scenario file `path` of the test data.
+pub fn scenario(path: &str) -> dyfos_shared::scenario::Scenario {
+    let text = std::fs::read_to_string(data(path)).unwrap_or_else(|e| panic!("scenario file {path}: {e}"));
+    dyfos_shared::scenario::Scenario::from_json(&text).unwrap_or_else(|e| panic!("scenario {path}: {e}"))
 }
 
 /// A scenario whose searches take seconds (for tests about what happens while searches

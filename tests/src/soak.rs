@@ -17,6 +17,7 @@
 //! assert!(matches!(serde_json::from_str(&line).unwrap(), Record::Sent(s) if s == planned.sent));
 //! ```
 
+use crate::scenario;
 use dyfos_client::prelude::*;
 use dyfos_client::{MapRequestError, RendezvousError};
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
@@ -50,11 +51,6 @@ pub struct SoakMap {
     pub belief: Belief,
     /// Parameters (the model is chosen per request).
     pub params: Params,
-}
-
-fn scenario(path: &str) -> Scenario {
-    let text = std::fs::read_to_string(crate::data(path)).expect("soak scenario file");
-    Scenario::from_json(&text).expect("valid soak scenario")
 }
 
 /// The writer's map (empty at first) and two fixed maps from the test data.

@@ -8,7 +8,7 @@
 //! `target/<profile>/deps/`; `dyfosd` and `dyfos` from `dyfos_tests::bin`, which
 //! builds them if they are missing.
 
-use dyfos_tests::{Sandbox, bin, data};
+use dyfos_tests::{Sandbox, Scratch, bin, data};
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -25,24 +25,6 @@ fn lib_dir() -> PathBuf {
         assert!(deps.join(lib).exists(), "{} is missing: run `cargo build -p dyfos-ffi`", deps.join(lib).display());
     }
     deps
-}
-
-/// A scratch directory, removed on drop.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Scratch {
-        let dir = std::env::temp_dir().join(format!("dyfos-ffi-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("scratch dir");
-        Scratch(dir)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 fn run(cmd: &mut Command) -> Output {
@@ -124,7 +106,7 @@ fn without_micros_line(text: &str) -> String {
 
 #[test]
 fn the_c_and_cpp_examples_print_what_dyfos_solve_prints() {
-    let scratch = Scratch::new("examples");
+    let scratch = Scratch::new("ffi-examples");
     let prefix = scratch.0.join("prefix");
     install(&prefix);
     let examples = crate_dir().join("examples");
@@ -168,16 +150,24 @@ struct AtKill {
     list: Option<String>,
 }
 
-/// Runs `program SCENARIO PREFIX DOMAIN` against a fresh daemon as the checks in
-/// `tests/c/` expect: their `--- SECTION` output is returned; at `--- kill` the
-/// daemon's snapshot of the named map and its list of maps are taken with `dyfos`,
-/// the daemon is killed, and the program told to go on.
-fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String, String)>, AtKill) {
+/// Builds the check `tests/c/SOURCE` against an installed tree and runs it as
+/// `program SCENARIO PREFIX DOMAIN`, on the example scenario, against a fresh daemon
+/// (sandbox `ffi-NAME`) as the checks expect: their `--- SECTION` output is returned;
+/// at `--- kill` the daemon's snapshot of the named map and its list of maps are
+/// taken with `dyfos`, the daemon is killed, and the program told to go on.
+fn run_check(source: &str, name: &str) -> (Vec<(String, String)>, AtKill) {
+    let scratch = Scratch::new(&format!("ffi-check-{name}"));
+    let prefix = scratch.0.join("prefix");
+    install(&prefix);
+    let program = scratch.0.join(format!("check-{name}"));
+    compile(&prefix, &crate_dir().join("tests/c").join(source), &program, Link::Shared);
+    let sandbox = Sandbox::new(&format!("ffi-{name}"));
+    let scenario = data("example.json");
     let mut daemon = sandbox.start_daemon(&[]);
-    let mut child = Command::new(program)
+    let mut child = Command::new(&program)
         .env("DYFOS_TEST_OCTOMAP", data("octomap/geb079.bt"))
         .env("DYFOS_TEST_DELTAS", data("deltas-every-kind.json"))
-        .arg(scenario)
+        .arg(&scenario)
         .args([&sandbox.prefix, &sandbox.domain])
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
@@ -226,14 +216,8 @@ fn run_check(program: &Path, scenario: &Path, sandbox: &Sandbox) -> (Vec<(String
 
 #[test]
 fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
-    let scratch = Scratch::new("check-c");
-    let prefix = scratch.0.join("prefix");
-    install(&prefix);
-    let program = scratch.0.join("ffi_check");
-    compile(&prefix, &crate_dir().join("tests/c/ffi_check.c"), &program, Link::Shared);
-    let sandbox = Sandbox::new("ffi-c");
+    let (sections, at_kill) = run_check("ffi_check.c", "c");
     let scenario = data("example.json");
-    let (sections, at_kill) = run_check(&program, &scenario, &sandbox);
     let mut compared = 0;
     for (name, text) in &sections {
         if let Some(rest) = name.strip_prefix("answer ") {
@@ -284,14 +268,8 @@ fn the_c_api_answers_like_dyfos_solve_and_returns_every_error_family() {
 
 #[test]
 fn the_cpp_wrapper_answers_like_dyfos_solve_and_throws_each_family() {
-    let scratch = Scratch::new("check-cpp");
-    let prefix = scratch.0.join("prefix");
-    install(&prefix);
-    let program = scratch.0.join("cpp_check");
-    compile(&prefix, &crate_dir().join("tests/c/cpp_check.cpp"), &program, Link::Shared);
-    let sandbox = Sandbox::new("ffi-cpp");
+    let (sections, _) = run_check("cpp_check.cpp", "cpp");
     let scenario = data("example.json");
-    let (sections, _) = run_check(&program, &scenario, &sandbox);
     let answers: Vec<_> = sections.iter().filter(|(n, _)| n.starts_with("answer ")).collect();
     assert_eq!(answers.len(), 2, "{sections:?}");
     for (name, text) in answers {
@@ -310,7 +288,7 @@ fn dynamic_section(file: &Path) -> String {
 /// still works after it is moved (pkg-config's prefix comes from where dyfos.pc lies).
 #[test]
 fn the_installed_library_has_a_soname_and_a_relocatable_pkg_config_file() {
-    let scratch = Scratch::new("relocate");
+    let scratch = Scratch::new("ffi-relocate");
     let first = scratch.0.join("first");
     run(Command::new("bash").arg(crate_dir().join("install.sh")).arg("--lib-dir").arg(lib_dir()).arg(&first));
     let soname = format!("libdyfos.so.{}", dyfos::DYFOS_ABI_VERSION);
@@ -346,7 +324,7 @@ fn the_installed_library_has_a_soname_and_a_relocatable_pkg_config_file() {
 /// replace the workspace's), so a `cargo` that fails does not matter.
 #[test]
 fn install_takes_the_built_library_without_running_cargo() {
-    let scratch = Scratch::new("no-rebuild");
+    let scratch = Scratch::new("ffi-no-rebuild");
     let target = scratch.0.join("target");
     let release = target.join("release");
     std::fs::create_dir_all(&release).expect("release dir");
@@ -392,7 +370,7 @@ fn install_takes_the_built_library_without_running_cargo() {
 #[test]
 #[ignore = "needs cmake: run client/ffi/test.sh --cmake"]
 fn the_cmake_package_finds_the_library() {
-    let scratch = Scratch::new("cmake");
+    let scratch = Scratch::new("ffi-cmake");
     let prefix = scratch.0.join("prefix");
     install(&prefix);
     let app = scratch.0.join("app");

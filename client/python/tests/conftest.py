@@ -7,12 +7,14 @@ directory), killed at the end, and the ``dyfos`` command line for reference answ
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import os
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -171,3 +173,32 @@ def write_json(tmp_path: Path, name: str, value: Any) -> Path:
     path = tmp_path / name
     path.write_text(json.dumps(value))
     return path
+
+
+def wait_until(condition: Callable[[], Any], show: Optional[Callable[[], Any]] = None) -> None:
+    """Polls ``condition`` until it holds; fails after ``PATIENCE`` s, with ``show()``."""
+    deadline = time.monotonic() + PATIENCE
+    while not condition():
+        assert time.monotonic() < deadline, f"timed out waiting; {show() if show else ''}"
+        time.sleep(0.005)
+
+
+@contextlib.contextmanager
+def querying_child(daemon: Daemon, admin: dyfos.Client, code: str, *args: str) -> Iterator["subprocess.Popen[str]"]:
+    """A Python child running ``code`` with ``daemon``'s prefix and domain and ``args``
+    as its arguments, once it printed ``querying`` and the daemon searches for it
+    (``admin``'s stats say so); killed on exit if it still runs."""
+    child = subprocess.Popen(
+        [sys.executable, "-c", code, daemon.prefix, daemon.domain, *args],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert child.stdout is not None
+        assert child.stdout.readline().strip() == "querying"
+        wait_until(lambda: admin.stats()["running"] >= 1)
+        yield child
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()

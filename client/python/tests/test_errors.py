@@ -11,7 +11,7 @@ from typing import Any, Dict, List, Type
 import pytest
 
 import dyfos
-from conftest import DATA, PATIENCE, slow_scenario, write_json
+from conftest import DATA, PATIENCE, slow_scenario, wait_until, write_json
 
 EXAMPLE = DATA / "example.json"
 MEAN = [0.0, 0.0, 0.3]
@@ -278,10 +278,3 @@ def test_busy_shutting_down_and_daemon_gone(own_daemon: Any, tmp_path: Path) -> 
         e = result.get("error")
         assert isinstance(e, dyfos.DaemonGoneError) and e.status == "daemon_gone", result
         assert e.retryable
-
-
-def wait_until(condition: Any) -> None:
-    deadline = time.monotonic() + PATIENCE
-    while not condition():
-        assert time.monotonic() < deadline, "timed out waiting"
-        time.sleep(0.005)

@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-import time
 from pathlib import Path
 from typing import Any
 
 import dyfos
-from conftest import DATA, PATIENCE, dyfos_cli, slow_scenario, write_json
+from conftest import DATA, PATIENCE, dyfos_cli, querying_child, slow_scenario, wait_until, write_json
 
 CHILD = """
 import json, sys
@@ -34,21 +31,9 @@ def test_client_killed_mid_query_disturbs_no_one(daemon: Any, tmp_path: Path) ->
 
     with daemon.client() as other:
         before = other.stats()
-        child = subprocess.Popen(
-            [sys.executable, "-c", CHILD, daemon.prefix, daemon.domain, str(slow)],
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        try:
-            assert child.stdout is not None
-            assert child.stdout.readline().strip() == "querying"
-            wait_until(lambda: other.stats()["running"] >= 1)
+        with querying_child(daemon, other, CHILD, str(slow)) as child:
             child.kill()
             child.wait(PATIENCE)
-        finally:
-            if child.poll() is None:
-                child.kill()
-                child.wait()
 
         # Another client's queries are answered, right, while the search is abandoned.
         map_id = other.upload_scenario(example)
@@ -73,10 +58,3 @@ def test_client_killed_mid_query_disturbs_no_one(daemon: Any, tmp_path: Path) ->
         after = other.stats()
         assert after["pid"] == before["pid"], "the same daemon, still serving"
         assert daemon.alive()
-
-
-def wait_until(condition: Any, show: Any = None) -> None:
-    deadline = time.monotonic() + PATIENCE
-    while not condition():
-        assert time.monotonic() < deadline, f"timed out waiting; {show() if show else ''}"
-        time.sleep(0.01)

@@ -6,12 +6,10 @@ from __future__ import annotations
 
 import signal
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any, Dict, Tuple
 
-from conftest import PATIENCE, slow_scenario, write_json
-from test_kill import wait_until
+from conftest import PATIENCE, querying_child, slow_scenario, wait_until, write_json
 
 CHILD = """
 import signal, sys
@@ -39,21 +37,9 @@ def query_in_child(daemon: Any, tmp_path: Path, deadline: float, signals: Any) -
     child printed after its query, and the daemon's stats once no search runs."""
     slow = write_json(tmp_path, "slow.json", slow_scenario())
     with daemon.client() as admin:
-        child = subprocess.Popen(
-            [sys.executable, "-c", CHILD, daemon.prefix, daemon.domain, str(slow), str(deadline)],
-            stdout=subprocess.PIPE,
-            text=True,
-        )
-        try:
-            assert child.stdout is not None
-            assert child.stdout.readline().strip() == "querying"
-            wait_until(lambda: admin.stats()["running"] >= 1)
+        with querying_child(daemon, admin, CHILD, str(slow), str(deadline)) as child:
             signals(child)
             out, _ = child.communicate(timeout=PATIENCE)
-        finally:
-            if child.poll() is None:
-                child.kill()
-                child.wait()
         # The daemon's worker is free again: an interrupted query is abandoned.
         wait_until(lambda: admin.stats()["running"] == 0)
         return out.strip(), admin.stats()

@@ -59,9 +59,7 @@ fn config(cli: &Cli) -> anyhow::Result<RoverConfig> {
         presence_timeout: cli::seconds("presence-timeout", cli.presence_timeout)?,
         linger: cli::seconds("linger", cli.linger)?,
         dead_reckoning: cli.dead_reckoning,
-        events: cli.output.events.clone(),
-        mcap: cli.output.mcap.clone(),
-        mcap_profile: cli.output.mcap_profile,
+        output: cli.output.config(),
         ..RoverConfig::new(cli.topics.topics(), mission, cli.seed)
     })
 }

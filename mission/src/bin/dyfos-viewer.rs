@@ -106,9 +106,7 @@ fn config(cli: &Cli) -> anyhow::Result<ViewerConfig> {
         idle_timeout: cli::seconds("idle-timeout", cli.idle_timeout)?,
         presence_timeout: cli::seconds("presence-timeout", cli.presence_timeout)?,
         rover_timeout: cli::seconds("rover-timeout", cli.rover_timeout)?,
-        events: cli.output.events.clone(),
-        mcap: cli.output.mcap.clone(),
-        mcap_profile: cli.output.mcap_profile,
+        output: cli.output.config(),
         ..ViewerConfig::new(client, cli.topics.topics(), mission, cli.algo, cli.seed)
     })
 }

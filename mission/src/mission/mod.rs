@@ -49,6 +49,7 @@
 //! ```
 
 pub mod log;
+pub mod output;
 pub mod presence;
 pub mod topics;
 

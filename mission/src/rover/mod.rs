@@ -30,7 +30,7 @@
 //! the simulated camera and the evaluation) and the robot half its estimate on
 //! `mission/<name>/estimate`, with matching sample numbers.
 //!
-//! With [`RoverConfig::mcap`] the rover keeps what it knows of the mission — its
+//! With [`OutputConfig::mcap`](crate::mission::output::OutputConfig::mcap) of [`RoverConfig::output`] the rover keeps what it knows of the mission — its
 //! true and estimated poses, its rendezvous beliefs, the measurements it got (with
 //! the viewer's poses) and the APE — as an MCAP file for Foxglove
 //! ([`crate::eval::McapMission`]), written when it exits.
@@ -49,9 +49,10 @@
 pub mod controller;
 pub mod ekf;
 
-use crate::eval::{McapMission, McapProfile, McapWriteError};
+use crate::eval::{McapMission, McapWriteError};
 use crate::mission::Mission;
 use crate::mission::log::EventLog;
+use crate::mission::output::OutputConfig;
 use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
 use crate::mission::topics::{Inbox, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
 use crate::sim::{SimClock, TrueRover, standard_normal, stream_seed, streams};
@@ -67,7 +68,6 @@ use ekf::Ekf;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 /// How the rover runs.
@@ -93,13 +93,8 @@ pub struct RoverConfig {
     pub drive: DriveConfig,
     /// Publish a truth/estimate sample every this many ticks (and at each waypoint).
     pub sample_every: u32,
-    /// JSON-lines event log.
-    pub events: Option<PathBuf>,
-    /// MCAP file of the mission as the rover knows it, written at exit (also after
-    /// a failure, with what was recorded).
-    pub mcap: Option<PathBuf>,
-    /// Encoding of [`RoverConfig::mcap`]: Foxglove's JSON (default) or ROS 2's CDR.
-    pub mcap_profile: McapProfile,
+    /// The event log and the MCAP file of the mission as the rover knows it.
+    pub output: OutputConfig,
     /// At the goal, how long at most to keep offering the finish to a viewer that
     /// has not acknowledged it, and to wait for the readers of the estimates (if
     /// any) to acknowledge the last sample, wall time. As long as a viewer waits
@@ -124,9 +119,7 @@ impl RoverConfig {
             dead_reckoning: false,
             drive: DriveConfig::default(),
             sample_every: 5,
-            events: None,
-            mcap: None,
-            mcap_profile: McapProfile::Foxglove,
+            output: OutputConfig::default(),
             linger: LINGER,
         }
     }
@@ -362,10 +355,10 @@ fn true_start(mission: &Mission, seed: u64) -> [f64; 3] {
     [s.x, s.y, dyfos_shared::math::wrap_angle(s.z)]
 }
 
-/// Runs the mission to the goal, then writes [`RoverConfig::mcap`] if asked for.
+/// Runs the mission to the goal, then writes [`OutputConfig::mcap`](crate::mission::output::OutputConfig::mcap) of [`RoverConfig::output`] if asked for.
 /// `stop` is polled (e.g. [`dyfos_process::shutdown::requested`]).
 pub fn run_rover(config: &RoverConfig, stop: &impl Fn() -> bool) -> Result<RoverReport, RoverRunError> {
-    McapMission::around(config.mcap.as_deref(), config.mcap_profile, &config.mission, |mcap| drive(config, stop, mcap))
+    config.output.around(&config.mission, |mcap| drive(config, stop, mcap))
 }
 
 fn drive(
@@ -386,7 +379,7 @@ fn drive(
         ack: topics.inbox(MISSION, EVALUATION_TOPIC, 16)?,
         _topics: topics,
     };
-    let log = EventLog::create(config.events.as_deref(), "rover")?;
+    let log = config.output.event_log("rover")?;
     let mission = &config.mission;
     let start = true_start(mission, config.seed);
     let mut run = Run {

@@ -25,7 +25,7 @@
 //! When the daemon has no answer (no feasible pose, unreachable) the viewer says
 //! so at once, and the rover dead-reckons that step.
 //!
-//! With [`ViewerConfig::mcap`] the viewer keeps its side of the mission — the
+//! With [`OutputConfig::mcap`](crate::mission::output::OutputConfig::mcap) of [`ViewerConfig::output`] the viewer keeps its side of the mission — the
 //! rendezvous beliefs, the daemon's answers, its measurements and poses — as an
 //! MCAP file for Foxglove ([`crate::eval::McapMission`]), written when it exits.
 //!
@@ -42,9 +42,10 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use crate::eval::{AnswerRecord, McapMission, McapProfile, McapWriteError};
+use crate::eval::{AnswerRecord, McapMission, McapWriteError};
 use crate::mission::Mission;
 use crate::mission::log::EventLog;
+use crate::mission::output::OutputConfig;
 use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
 use crate::mission::topics::{Inbox, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
 use crate::rover::{MISSION, SIM};
@@ -65,7 +66,6 @@ use dyfos_shared::world::{MapDelta, Sun, World};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde_json::json;
-use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -100,13 +100,8 @@ pub struct ViewerConfig {
     pub presence_timeout: Duration,
     /// Exit (the rover went away) after this long without the rover's heartbeat, wall time.
     pub rover_timeout: Duration,
-    /// JSON-lines event log.
-    pub events: Option<PathBuf>,
-    /// MCAP file of the viewer's side of the mission, written at exit (also after
-    /// a failure, with what was recorded).
-    pub mcap: Option<PathBuf>,
-    /// Encoding of [`ViewerConfig::mcap`]: Foxglove's JSON (default) or ROS 2's CDR.
-    pub mcap_profile: McapProfile,
+    /// The event log and the MCAP file of the viewer's side of the mission.
+    pub output: OutputConfig,
     /// Weights of the `learned` SDSMM, for missions whose `params.model` is
     /// `learned` (the camera's noise; `dyfosd` needs the same file, its `--model`).
     pub learned: Option<Arc<Learned>>,
@@ -132,9 +127,7 @@ impl ViewerConfig {
             idle_timeout: Duration::from_secs(120),
             presence_timeout: Duration::from_secs(2),
             rover_timeout: Duration::from_secs(20),
-            events: None,
-            mcap: None,
-            mcap_profile: McapProfile::Foxglove,
+            output: OutputConfig::default(),
             learned: None,
         }
     }
@@ -394,9 +387,9 @@ impl Viewer<'_> {
 }
 
 /// Runs until the rover finishes (or goes quiet for `idle_timeout`); then writes
-/// [`ViewerConfig::mcap`], if asked for.
+/// [`OutputConfig::mcap`](crate::mission::output::OutputConfig::mcap) of [`ViewerConfig::output`], if asked for.
 pub fn run_viewer(config: &ViewerConfig, stop: &impl Fn() -> bool) -> Result<ViewerReport, ViewerRunError> {
-    McapMission::around(config.mcap.as_deref(), config.mcap_profile, &config.mission, |mcap| serve(config, stop, mcap))
+    config.output.around(&config.mission, |mcap| serve(config, stop, mcap))
 }
 
 fn serve(
@@ -413,7 +406,7 @@ fn serve(
     let rover = Peer::open(&topics, ROVER_PRESENCE_TOPIC, config.presence_timeout)?;
     let rover_acks = topics.inbox::<AckMsg>(MISSION, ROVER_ACK_TOPIC, 256)?;
     let acks = topics.outbox::<AckMsg>(MISSION, VIEWER_ACK_TOPIC)?;
-    let log = EventLog::create(config.events.as_deref(), "viewer")?;
+    let log = config.output.event_log("viewer")?;
     let mut v = Viewer {
         config,
         client,

@@ -195,34 +195,17 @@ impl Daemon {
         let mut handled = 0;
         let (ports, replies, state) = (&self.ports, &*self.replies, &mut self.state);
         loop {
-            let before = handled;
-            match ports.rendezvous.receive() {
-                Ok(Some(active)) => {
-                    handled += 1;
-                    rendezvous::on_request(state, replies, active);
-                }
-                Ok(None) => {}
-                Err(e) => receive_failed(&state.pool, "rendezvous", e),
-            }
-            match ports.map.receive() {
-                Ok(Some(active)) => {
-                    handled += 1;
-                    map::on_request(state, replies, active);
-                }
-                Ok(None) => {}
-                Err(e) => receive_failed(&state.pool, "map", e),
-            }
-            match ports.stats.receive() {
-                Ok(Some(active)) => {
-                    handled += 1;
-                    stats::on_request(state, replies, active);
-                }
-                Ok(None) => {}
-                Err(e) => receive_failed(&state.pool, "stats", e),
-            }
-            if handled == before {
+            // One request of each service in turn, so that none waits behind another's burst.
+            let took = [
+                take(state, "rendezvous", ports.rendezvous.receive(), |s, a| rendezvous::on_request(s, replies, a)),
+                take(state, "map", ports.map.receive(), |s, a| map::on_request(s, replies, a)),
+                take(state, "stats", ports.stats.receive(), |s, a| stats::on_request(s, replies, a)),
+            ];
+            let took = took.into_iter().filter(|t| *t).count();
+            if took == 0 {
                 break;
             }
+            handled += took;
         }
         if handled > 0 {
             self.pacing.arrived();
@@ -383,7 +366,25 @@ fn log_workers(pool: &Pool, scheduling: &Scheduling, nice: u8) {
 /// done; other clients are served meanwhile (iceoryx2 skips the full one). The
 /// client decides how often this happens, so it is counted and logged under the
 /// rate limit, never once per pass.
-fn receive_failed(pool: &Pool, service: &str, e: iceoryx2::port::ReceiveError) {
-    pool.stats().receive_failed();
-    warn!("{service} receive failed: {e:?} (a client sends more requests than it may have in flight; they wait)");
+/// Hands the request `received` from `service`, if any, to `handle`; whether there was one.
+fn take<A>(
+    state: &mut State,
+    service: &str,
+    received: Result<Option<A>, iceoryx2::port::ReceiveError>,
+    handle: impl FnOnce(&mut State, A),
+) -> bool {
+    match received {
+        Ok(Some(active)) => {
+            handle(state, active);
+            true
+        }
+        Ok(None) => false,
+        Err(e) => {
+            state.pool.stats().receive_failed();
+            warn!(
+                "{service} receive failed: {e:?} (a client sends more requests than it may have in flight; they wait)"
+            );
+            false
+        }
+    }
 }

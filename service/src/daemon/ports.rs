@@ -116,26 +116,21 @@ impl Ports {
             reason: format!("{e:?}"),
         };
         let named = |e| IpcError::new("service name", e);
-        let rendezvous = recovering(&node, &names.rendezvous, MessagingPattern::RequestResponse, || {
-            Ok(limits.request_response(services.rendezvous().map_err(named)?).open_or_create())
-        })?
-        .map_err(|e| incompatible(&names.rendezvous, &e))?;
-        let map = recovering(&node, &names.map, MessagingPattern::RequestResponse, || {
-            Ok(limits.request_response(services.map().map_err(named)?).open_or_create())
-        })?
-        .map_err(|e| incompatible(&names.map, &e))?;
-        let stats = recovering(&node, &names.stats, MessagingPattern::RequestResponse, || {
-            Ok(limits.request_response(services.stats().map_err(named)?).open_or_create())
-        })?
-        .map_err(|e| incompatible(&names.stats, &e))?;
-        let wake_service = recovering(&node, &names.wake, MessagingPattern::Event, || {
-            Ok(limits.event(services.wake().map_err(named)?).open_or_create())
-        })?
-        .map_err(|e| incompatible(&names.wake, &e))?;
-        let reply_service = recovering(&node, &names.reply, MessagingPattern::Event, || {
-            Ok(limits.event(services.reply().map_err(named)?).open_or_create())
-        })?
-        .map_err(|e| incompatible(&names.reply, &e))?;
+        // Each service opened or created with the daemon's limits, through
+        // `recovering`; one that exists with other payload types is `Incompatible`.
+        macro_rules! open {
+            ($service:ident, $limits:ident, $pattern:ident) => {
+                recovering(&node, &names.$service, MessagingPattern::$pattern, || {
+                    Ok(limits.$limits(services.$service().map_err(named)?).open_or_create())
+                })?
+                .map_err(|e| incompatible(&names.$service, &e))?
+            };
+        }
+        let rendezvous = open!(rendezvous, request_response, RequestResponse);
+        let map = open!(map, request_response, RequestResponse);
+        let stats = open!(stats, request_response, RequestResponse);
+        let wake_service = open!(wake, event, Event);
+        let reply_service = open!(reply, event, Event);
         // A service serves one daemon: another's server there means it runs.
         let server = |e: ServerCreateError| match e {
             ServerCreateError::ExceedsMaxSupportedServers => DaemonCreateError::AlreadyRunning(names.prefix.clone()),

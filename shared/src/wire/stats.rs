@@ -30,8 +30,8 @@ pub struct StatsRequest {
     pub reply_to: [u64; 2],
 }
 
-/// The daemon's health and counters.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+/// The daemon's health and counters; `Default` is all zeros.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
 #[type_name("dyfos::StatsReply")]
 #[repr(C)]
 pub struct StatsReply {
@@ -79,31 +79,6 @@ pub struct StatsReply {
     /// Log lines at `info` and above left out by the rate limit (the log says how
     /// many after each 10 s window).
     pub log_suppressed: u64,
-}
-
-impl Default for StatsReply {
-    fn default() -> Self {
-        StatsReply {
-            request_id: 0,
-            pid: 0,
-            uptime_micros: 0,
-            queries_served: 0,
-            requests_failed: 0,
-            map_requests: 0,
-            maps: 0,
-            queued: 0,
-            running: 0,
-            workers: 0,
-            latency_micros: [0; 4],
-            latency_samples: 0,
-            errors_by_code: [0; STATUS_SLOTS],
-            queries_abandoned: 0,
-            receive_failures: 0,
-            log_warnings: 0,
-            ipc_warnings: 0,
-            log_suppressed: 0,
-        }
-    }
 }
 
 /// [`StatsReply`] decoded.

@@ -13,31 +13,12 @@
 
 use dyfos_client::prelude::*;
 use dyfos_shared::wire::rendezvous::Mode;
-use dyfos_tests::{KillOnDrop, PATIENCE, RawClient, Sandbox, wait_for};
+use dyfos_tests::{KillOnDrop, PATIENCE, RawClient, Sandbox, slow_search_scenario, wait_for};
 use std::process::Stdio;
 use std::time::Duration;
 
-/// The slow scenario ([`dyfos_tests::slow_search_scenario`]).
-fn scenario() -> Scenario {
-    dyfos_tests::slow_search_scenario()
-}
-
-/// Its world: map 1 of these tests.
-fn slow_world() -> World {
-    scenario().world
-}
-
-/// A daemon with two workers (so one `brute` query may run at a time) and
-/// `slow_world` as map 1.
-fn start(sandbox: &Sandbox) -> (dyfos_tests::DaemonProcess, Client) {
-    let daemon = sandbox.start_daemon(&["--workers", "2"]);
-    let mut admin = sandbox.client();
-    admin.upload_map(1, &slow_world(), false, PATIENCE).unwrap();
-    (daemon, admin)
-}
-
 fn brute(budget: Option<u64>) -> RendezvousRequest {
-    let s = scenario();
+    let s = slow_search_scenario();
     RendezvousRequest { algorithm: Algorithm::Brute, budget, params: s.params, ..RendezvousRequest::new(1, s.belief) }
 }
 
@@ -59,7 +40,7 @@ fn abandoned(admin: &mut Client) -> u64 {
 /// an id of its own. The file is removed when the returned `TempFile` is dropped.
 fn start_doomed_query(sandbox: &Sandbox, admin: &mut Client) -> (KillOnDrop, TempFile) {
     let file = TempFile(sandbox.state_dir.with_extension("slow.json"));
-    std::fs::write(&file.0, Scenario { world: slow_world(), ..scenario() }.to_json()).unwrap();
+    std::fs::write(&file.0, slow_search_scenario().to_json()).unwrap();
     let child = sandbox
         .dyfos("query")
         .arg(&file.0)
@@ -76,7 +57,7 @@ fn start_doomed_query(sandbox: &Sandbox, admin: &mut Client) -> (KillOnDrop, Tem
 #[test]
 fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
     let sandbox = Sandbox::new("abandon-kill");
-    let (daemon, mut admin) = start(&sandbox);
+    let (daemon, mut admin) = sandbox.start_slow();
     let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
     assert_eq!(abandoned(&mut admin), 0, "a search whose client is there goes on");
     child.kill(); // SIGKILL, and reap
@@ -105,7 +86,7 @@ fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
 #[test]
 fn a_client_that_stops_waiting_abandons_its_query() {
     let sandbox = Sandbox::new("abandon-timeout");
-    let (_daemon, mut admin) = start(&sandbox);
+    let (_daemon, mut admin) = sandbox.start_slow();
     let mut impatient = sandbox.client();
     // The client gives up long before the search could end and drops its pending
     // response; no dead-node cleanup is needed to see that.
@@ -126,7 +107,7 @@ fn a_client_that_stops_waiting_abandons_its_query() {
 #[test]
 fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
     let sandbox = Sandbox::new("abandon-queued");
-    let (_daemon, mut admin) = start(&sandbox);
+    let (_daemon, mut admin) = sandbox.start_slow();
     let raw = RawClient::open(&sandbox);
     let dyfos =
         RendezvousRequest { algorithm: Algorithm::Dyfos, deadline: Some(Duration::from_secs(600)), ..brute(None) };
@@ -163,7 +144,7 @@ fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
 #[test]
 fn the_daemon_cleans_up_after_a_killed_client_by_itself() {
     let sandbox = Sandbox::new("abandon-janitor");
-    let (daemon, mut admin) = start(&sandbox);
+    let (daemon, mut admin) = sandbox.start_slow();
     let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
     child.kill(); // SIGKILL, and reap
     wait_for("the orphaned search to be abandoned", || (abandoned(&mut admin) == 1).then_some(()));

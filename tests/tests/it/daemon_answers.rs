@@ -4,16 +4,12 @@ use dyfos_client::prelude::*;
 use dyfos_service::search::SearchControl;
 use dyfos_shared::answer::StopReason;
 use dyfos_shared::world::VerticalCylinder;
-use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, wait_for, without_micros};
+use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, scenario, wait_for, without_micros};
 use std::io::Write;
 use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
-
-fn scenario(path: &str) -> Scenario {
-    Scenario::from_json(&std::fs::read_to_string(data(path)).expect("scenario file")).expect("valid scenario")
-}
 
 fn offline(world: &World, s: &Scenario, request: &RendezvousRequest) -> Result<Answer, dyfos_service::SearchError> {
     let model = NoiseModel::from_params(&request.params).expect("model");
@@ -67,10 +63,8 @@ fn daemon_answers_equal_the_offline_library_bit_for_bit() {
 #[test]
 fn inline_deltas_are_applied_before_the_search_and_kept() {
     let sandbox = Sandbox::new("inline");
-    let _daemon = sandbox.start_daemon(&[]);
-    let mut client = sandbox.client();
     let s = scenario("example.json");
-    client.upload_map(5, &s.world, false, PATIENCE).unwrap();
+    let (_daemon, mut client) = sandbox.start_serving(5, &s.world);
     let pole = Obstacle::Cylinder(VerticalCylinder { center: na::Point2::new(-1.5, 0.5), radius: 0.4, height: 9.0 });
     let deltas =
         vec![MapDelta::UpsertObstacle { id: 77, obstacle: pole }, MapDelta::SetSun(Sun::new(0.4, -2.0).unwrap())];
@@ -97,10 +91,8 @@ fn inline_deltas_are_applied_before_the_search_and_kept() {
 #[test]
 fn a_deadline_returns_the_best_pose_so_far_flagged() {
     let sandbox = Sandbox::new("deadline");
-    let _daemon = sandbox.start_daemon(&[]);
-    let mut client = sandbox.client();
     let s = scenario("golden/scenarios/numerical/map_00.json");
-    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let (_daemon, mut client) = sandbox.start_serving(1, &s.world);
     let request = RendezvousRequest {
         algorithm: Algorithm::Brute,
         deadline: Some(Duration::from_millis(30)),
@@ -203,10 +195,8 @@ fn dyfos_query_prints_what_dyfos_solve_prints() {
 #[test]
 fn a_slow_brute_query_does_not_hold_up_a_cheap_one() {
     let sandbox = Sandbox::new("fair");
-    let _daemon = sandbox.start_daemon(&[]);
-    let mut client = sandbox.client();
     let s = scenario("golden/scenarios/hard/hard_00.json");
-    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let (_daemon, mut client) = sandbox.start_serving(1, &s.world);
     let brute_done = Arc::new(AtomicBool::new(false));
     let brute = {
         let mut slow = sandbox.client();

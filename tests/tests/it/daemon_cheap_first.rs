@@ -14,22 +14,12 @@
 
 use dyfos_client::prelude::*;
 use dyfos_shared::wire::rendezvous::Mode;
-use dyfos_tests::{PATIENCE, PendingRendezvous, RawClient, Sandbox, wait_for};
+use dyfos_tests::{PATIENCE, PendingRendezvous, RawClient, Sandbox, slow_search_scenario, wait_for};
 use std::time::Duration;
-
-/// The slow scenario ([`dyfos_tests::slow_search_scenario`]).
-fn scenario() -> Scenario {
-    dyfos_tests::slow_search_scenario()
-}
-
-/// Its world: map 1 of these tests.
-fn slow_world() -> World {
-    scenario().world
-}
 
 /// A long search of map 1.
 fn search(algorithm: Algorithm, seed: u64) -> RendezvousRequest {
-    let s = scenario();
+    let s = slow_search_scenario();
     RendezvousRequest {
         algorithm,
         seed,
@@ -51,9 +41,7 @@ fn answered(pending: &[PendingRendezvous]) -> usize {
 #[test]
 fn cheap_requests_are_answered_while_every_worker_searches() {
     let sandbox = Sandbox::new("cheap-first");
-    let _daemon = sandbox.start_daemon(&["--workers", "2"]);
-    let mut admin = sandbox.client();
-    admin.upload_map(1, &slow_world(), false, PATIENCE).unwrap();
+    let (_daemon, mut admin) = sandbox.start_slow();
 
     // Two raw clients, each connected (one round trip) before anything is timed by
     // order. The first sends a brute search (it may hold all workers but one) and
@@ -122,10 +110,8 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
 #[test]
 fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
     let sandbox = Sandbox::new("hold");
-    let _daemon = sandbox.start_daemon(&["--workers", "2"]);
-    let mut admin = sandbox.client();
-    admin.upload_map(1, &slow_world(), false, PATIENCE).unwrap();
-    let example = Scenario::from_json(&std::fs::read_to_string(dyfos_tests::data("example.json")).unwrap()).unwrap();
+    let (_daemon, mut admin) = sandbox.start_slow();
+    let example = dyfos_tests::scenario("example.json");
     admin.upload_map(2, &example.world, false, PATIENCE).unwrap();
 
     let greedy = RawClient::open(&sandbox);

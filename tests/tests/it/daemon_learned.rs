@@ -5,7 +5,7 @@
 use dyfos_client::prelude::*;
 use dyfos_service::learned::load_model;
 use dyfos_service::search::SearchControl;
-use dyfos_tests::{PATIENCE, Sandbox, bin, data, without_micros};
+use dyfos_tests::{PATIENCE, Sandbox, bin, data, scenario, without_micros};
 use std::process::Command;
 
 fn model_file() -> String {
@@ -17,7 +17,7 @@ fn learned_queries_match_the_offline_library_bit_for_bit() {
     let sandbox = Sandbox::new("learned");
     let _daemon = sandbox.start_daemon(&["--model", &model_file()]);
     let mut client = sandbox.client();
-    let s = Scenario::from_json(&std::fs::read_to_string(data("example.json")).unwrap()).unwrap();
+    let s = scenario("example.json");
     client.upload_map(1, &s.world, false, PATIENCE).unwrap();
     let weights = load_model(&data("learned/model.bin")).unwrap();
     for seed in [0, 5] {
@@ -35,10 +35,8 @@ fn learned_queries_match_the_offline_library_bit_for_bit() {
 #[test]
 fn without_a_model_file_learned_is_refused() {
     let sandbox = Sandbox::new("nolearned");
-    let _daemon = sandbox.start_daemon(&[]);
-    let mut client = sandbox.client();
-    let s = Scenario::from_json(&std::fs::read_to_string(data("example.json")).unwrap()).unwrap();
-    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let s = scenario("example.json");
+    let (_daemon, mut client) = sandbox.start_serving(1, &s.world);
     let params = Params { model: ModelKind::Learned, ..s.params };
     let err = client.rendezvous(&RendezvousRequest { params, ..RendezvousRequest::new(1, s.belief) }, PATIENCE);
     let err = err.unwrap_err();

@@ -3,22 +3,16 @@
 use dyfos_client::prelude::*;
 use dyfos_shared::answer::StopReason;
 use dyfos_shared::world::VerticalCylinder;
-use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, signal, wait_for, without_micros};
+use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, scenario, signal, wait_for, without_micros};
 use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-fn scenario(path: &str) -> Scenario {
-    Scenario::from_json(&std::fs::read_to_string(data(path)).unwrap()).unwrap()
-}
-
 #[test]
 fn kill_9_and_restart_keeps_the_maps_and_clients_reconnect() {
     let sandbox = Sandbox::new("restart");
-    let mut daemon = sandbox.start_daemon(&[]);
-    let mut client = sandbox.client();
     let s = scenario("golden/scenarios/numerical/map_00.json");
-    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let (mut daemon, mut client) = sandbox.start_serving(1, &s.world);
     let pole = Obstacle::Cylinder(VerticalCylinder { center: na::Point2::new(0.0, 5.0), radius: 0.3, height: 2.0 });
     client.apply(1, Some(0), &[MapDelta::UpsertObstacle { id: 500, obstacle: pole }], PATIENCE).unwrap();
     let bounds = Bounds::new([0.0, 0.0, 30.0, 30.0]).unwrap();
@@ -74,11 +68,9 @@ fn a_second_daemon_on_the_same_prefix_refuses_to_start() {
 #[test]
 fn killing_a_client_mid_query_does_not_disturb_the_others() {
     let sandbox = Sandbox::new("clientkill");
-    let daemon = sandbox.start_daemon(&[]);
-    let mut client = sandbox.client();
     let file = data("golden/scenarios/hard/hard_01.json");
     let s = scenario("golden/scenarios/hard/hard_01.json");
-    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let (daemon, mut client) = sandbox.start_serving(1, &s.world);
     let child = sandbox
         .dyfos("query")
         .arg(&file)
@@ -105,10 +97,8 @@ fn killing_a_client_mid_query_does_not_disturb_the_others() {
 #[test]
 fn sigterm_finishes_in_flight_queries_and_leaves_no_shared_memory() {
     let sandbox = Sandbox::new("sigterm");
-    let mut daemon = sandbox.start_daemon(&[]);
     let s = scenario("golden/scenarios/numerical/map_02.json");
-    let mut client = sandbox.client();
-    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let (mut daemon, mut client) = sandbox.start_serving(1, &s.world);
     let in_flight = {
         let mut slow = sandbox.client();
         let request =
@@ -288,10 +278,8 @@ fn stop_and_continue(pid: u32, settle: Duration) {
 #[test]
 fn a_stopped_and_continued_daemon_keeps_serving_and_sigint_stops_it() {
     let sandbox = Sandbox::new("stop-cont");
-    let mut daemon = sandbox.start_daemon(&[]);
     let s = scenario("golden/scenarios/numerical/map_02.json");
-    let mut client = sandbox.client();
-    client.upload_map(1, &s.world, false, PATIENCE).unwrap();
+    let (mut daemon, mut client) = sandbox.start_serving(1, &s.world);
     let request = RendezvousRequest { params: s.params, ..RendezvousRequest::new(1, s.belief) };
     for round in 0..3 {
         // The settling time lets the daemon go from polling to sleeping in its wait.

@@ -15,17 +15,13 @@ use dyfos_shared::wire::rendezvous::{Mode, RendezvousReply, RendezvousRequestHea
 use dyfos_shared::wire::{ANY_VERSION, Rejection};
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
 use dyfos_tests::{
-    PATIENCE, RawClient, RawFixture, Sandbox, bin, create_test_map, data, param_floats_mut, without_micros,
+    PATIENCE, RawClient, RawFixture, Sandbox, bin, create_test_map, data, param_floats_mut, scenario, without_micros,
 };
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
-
-fn scenario(path: &str) -> Scenario {
-    Scenario::from_json(&std::fs::read_to_string(data(path)).unwrap()).unwrap()
-}
 
 fn status(code: u32) -> Status {
     Status::try_from(code).unwrap_or_else(|e| panic!("the daemon replied with an unknown code: {e}"))

@@ -10,31 +10,13 @@
 use dyfos_client::prelude::*;
 use dyfos_service::daemon::record::topics;
 use dyfos_tests::soak::{WRITER_MAP, maps, plan, writer_batch};
-use dyfos_tests::{PATIENCE, Sandbox, bin, wait_for};
+use dyfos_tests::{PATIENCE, Sandbox, Scratch, bin, wait_for};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 use std::sync::{Arc, Mutex};
 
 const TIMEOUT: std::time::Duration = PATIENCE;
-
-/// A fresh folder for recordings, removed on drop.
-struct Dir(PathBuf);
-
-impl Dir {
-    fn new(test: &str) -> Dir {
-        let dir = std::env::temp_dir().join(format!("dyfos-record-{test}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("recording folder");
-        Dir(dir)
-    }
-}
-
-impl Drop for Dir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 /// What the clients got back, by what the recording should hold.
 #[derive(Debug, Default)]
@@ -97,6 +79,15 @@ fn replay(args: &[&str]) -> Output {
 
 fn text(o: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+/// [`drive`] against a daemon with two workers recording to `file`, stopped cleanly
+/// after it.
+fn record(sandbox: &Sandbox, file: &Path, per_client: u64) -> Sent {
+    let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", file.to_str().unwrap()]);
+    let sent = drive(sandbox, per_client);
+    assert!(daemon.terminate().success(), "{}", daemon.log());
+    sent
 }
 
 /// The mix: three query clients on three maps (two uploaded, one created and
@@ -199,11 +190,9 @@ fn drive(sandbox: &Sandbox, per_client: u64) -> Sent {
 #[test]
 fn a_recorded_run_replays_identically_and_a_changed_parameter_shows() {
     let sandbox = Sandbox::new("record");
-    let dir = Dir::new("replay");
+    let dir = Scratch::new("record-replay");
     let file = dir.0.join("traffic.mcap");
-    let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", file.to_str().unwrap()]);
-    let sent = drive(&sandbox, 10);
-    assert!(daemon.terminate().success(), "{}", daemon.log());
+    let sent = record(&sandbox, &file, 10);
 
     let messages = read_complete(&file);
     let count = |t: &str| messages.get(t).map_or(0, Vec::len) as u64;
@@ -280,7 +269,7 @@ fn a_recorded_run_replays_identically_and_a_changed_parameter_shows() {
 #[test]
 fn a_killed_recording_daemon_leaves_readable_rotated_files() {
     let sandbox = Sandbox::new("record-kill");
-    let dir = Dir::new("kill");
+    let dir = Scratch::new("record-kill");
     let file = dir.0.join("field.mcap");
     // Two workers: the recording's order is still the order the client saw its
     // answers in (a query is recorded before its reply is sent), so the last one on
@@ -488,11 +477,9 @@ fn rewrite_in_old_spelling(from: &Path, to: &Path) -> usize {
 #[test]
 fn a_recording_in_the_old_delta_spelling_still_replays() {
     let sandbox = Sandbox::new("record-old");
-    let dir = Dir::new("old");
+    let dir = Scratch::new("record-old");
     let first = dir.0.join("first.mcap");
-    let mut daemon = sandbox.start_daemon_logging("info", &["--workers", "2", "--record", first.to_str().unwrap()]);
-    drive(&sandbox, 6);
-    assert!(daemon.terminate().success(), "{}", daemon.log());
+    record(&sandbox, &first, 6);
     // The maps are kept in the state directory: the next file starts with them.
     let second = dir.0.join("second.mcap");
     let mut daemon = sandbox.start_daemon_logging("info", &["--record", second.to_str().unwrap()]);

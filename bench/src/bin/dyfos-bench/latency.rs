@@ -15,6 +15,7 @@ use dyfos_bench::latency::{
     in_process, map_id, serve_floor,
 };
 use dyfos_bench::svg::{Series, line_plot};
+use dyfos_bench::table::{self, Align};
 use dyfos_client::{Client, ClientConfig, RendezvousError};
 use dyfos_process::child::KillOnDrop;
 use dyfos_service::launch::DyfosdCommand;
@@ -571,25 +572,21 @@ fn latency_cells(l: Option<Latencies>) -> String {
 }
 
 fn table(rows: &[&Row], open: bool) -> String {
+    let (l, r) = (Align::Left, Align::Right);
+    let mut columns = vec![("workload", l), ("clients", r)];
+    columns.extend(open.then_some(("offered /s", r)));
+    columns.extend([("answered /s", r), ("p50 µs", r), ("p90 µs", r), ("p99 µs", r), ("p99.9 µs", r), ("max µs", r)]);
+    columns.extend(open.then_some(("sent late p99 µs", r)));
+    columns.extend([("dyfosd CPU", r), ("errors", l)]);
     let mut out = String::new();
-    if open {
-        out.push_str("| workload | clients | offered /s | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | sent late p99 µs | dyfosd CPU | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
-    } else {
-        out.push_str("| workload | clients | answered /s | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs | dyfosd CPU | errors |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---|\n");
-    }
-    for r in rows {
-        let offered = r.rate.map_or(String::new(), |x| format!(" {x:.0} |"));
-        let late = if open { format!(" {} |", r.late.map_or("–".into(), |l| us(l.p99_us))) } else { String::new() };
-        let _ = writeln!(
-            out,
-            "| {} | {} |{offered} {:.0} | {} |{late} {} | {} |",
-            r.workload.name(),
-            r.clients,
-            r.throughput,
-            latency_cells(r.latency),
-            cpu_cell(r),
-            errors_cell(r)
-        );
+    table::header(&mut out, &columns);
+    for row in rows {
+        let mut cells = vec![row.workload.name().to_string(), row.clients.to_string()];
+        cells.extend(row.rate.map(|x| format!("{x:.0}")));
+        cells.extend([format!("{:.0}", row.throughput), latency_cells(row.latency)]);
+        cells.extend(open.then(|| row.late.map_or("–".into(), |l| us(l.p99_us))));
+        cells.extend([cpu_cell(row), errors_cell(row)]);
+        table::row(&mut out, &cells);
     }
     out
 }

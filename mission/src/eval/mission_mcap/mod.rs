@@ -587,11 +587,8 @@ impl McapMission {
 
     /// True and estimated poses, paths, the covariance ellipse, the APE.
     fn rover_messages(&self, out: &mut Vec<(Topic, u64, Message)>) {
-        let mut truth = self.trace.truth.clone();
-        truth.sort_by_key(|t| t.sample);
-        truth.dedup_by_key(|t| t.sample);
-        let mut path = Vec::with_capacity(truth.len());
-        let mut driving = true;
+        let truth = in_sample_order(&self.trace.truth, |t| t.sample);
+        let mut path = GrowingPath::new(truth.len());
         for (i, t) in truth.iter().enumerate() {
             let ns = nanos(t.sim_time);
             let [x, y, theta] = t.pose;
@@ -602,18 +599,10 @@ impl McapMission {
                 Message::Transform { parent: "map", child: "rover", position, yaw: theta, pitch: 0.0 },
             ));
             out.push((Topic::RoverPose, ns, Message::Pose { position, yaw: theta }));
-            path.push((ns, t.pose));
-            let arrived = driving && t.phase != Phase::Driving;
-            driving = t.phase == Phase::Driving;
-            if i % PATH_EVERY == 0 || arrived || i + 1 == truth.len() {
-                out.push((Topic::RoverPath, ns, Message::Path(path.clone())));
-            }
+            out.extend(path.add(i, ns, t.pose, t.phase).map(|p| (Topic::RoverPath, ns, p)));
         }
-        let mut estimates = self.trace.estimates.clone();
-        estimates.sort_by_key(|e| e.sample);
-        estimates.dedup_by_key(|e| e.sample);
-        let mut path = Vec::with_capacity(estimates.len());
-        let mut driving = true;
+        let estimates = in_sample_order(&self.trace.estimates, |e| e.sample);
+        let mut path = GrowingPath::new(estimates.len());
         for (i, e) in estimates.iter().enumerate() {
             let ns = nanos(e.sim_time);
             let m = e.belief.mean;
@@ -624,12 +613,7 @@ impl McapMission {
                 Message::Transform { parent: "map", child: "rover_estimate", position, yaw: m.z, pitch: 0.0 },
             ));
             out.push((Topic::EstimatePose, ns, Message::Belief(e.belief)));
-            path.push((ns, [m.x, m.y, m.z]));
-            let arrived = driving && e.phase != Phase::Driving;
-            driving = e.phase == Phase::Driving;
-            if i % PATH_EVERY == 0 || arrived || i + 1 == estimates.len() {
-                out.push((Topic::EstimatePath, ns, Message::Path(path.clone())));
-            }
+            out.extend(path.add(i, ns, [m.x, m.y, m.z], e.phase).map(|p| (Topic::EstimatePath, ns, p)));
             let c = e.belief.cov.to_rows();
             let ring = scene::ellipse([m.x, m.y], [[c[0][0], c[0][1]], [c[1][0], c[1][1]]], ELLIPSE_SIGMAS, 0.03);
             let mut p = Primitives::default();
@@ -724,6 +708,36 @@ impl McapMission {
             });
         }
         vec![Entity::new("camera", "frustum", true, frustum), Entity::new("map", "line_of_sight", false, sight)]
+    }
+}
+
+/// `samples` in sample order, each sample once.
+fn in_sample_order<T: Clone>(samples: &[T], sample: impl Fn(&T) -> u64) -> Vec<T> {
+    let mut sorted = samples.to_vec();
+    sorted.sort_by_key(&sample);
+    sorted.dedup_by_key(|t| sample(t));
+    sorted
+}
+
+/// A path drawn as it grows: published every [`PATH_EVERY`] samples, at each
+/// arrival at a waypoint, and at the last sample.
+struct GrowingPath {
+    points: Vec<(u64, [f64; 3])>,
+    driving: bool,
+    samples: usize,
+}
+
+impl GrowingPath {
+    fn new(samples: usize) -> Self {
+        GrowingPath { points: Vec::with_capacity(samples), driving: true, samples }
+    }
+
+    /// Adds sample `i` of the path; the path so far if it is to be published now.
+    fn add(&mut self, i: usize, ns: u64, point: [f64; 3], phase: Phase) -> Option<Message> {
+        self.points.push((ns, point));
+        let arrived = self.driving && phase != Phase::Driving;
+        self.driving = phase == Phase::Driving;
+        (i.is_multiple_of(PATH_EVERY) || arrived || i + 1 == self.samples).then(|| Message::Path(self.points.clone()))
     }
 }
 
