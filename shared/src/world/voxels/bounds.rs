@@ -92,8 +92,14 @@ impl Clearance {
     /// are so large against the cells that float rounding along the walk nears the
     /// margin: cells below 2^-24 of the coordinates' magnitude (16 M cells; a grid's
     /// indices stay within 2^20), or anything not finite.
-    pub(super) fn new(resolution: f64, origin: Point3<f64>, seg: &Segment, enabled: bool) -> Clearance {
-        let inv_dir = [1.0 / seg.dir[0], 1.0 / seg.dir[1], 1.0 / seg.dir[2]];
+    /// `inv_dir` is 1 / `seg.dir`, per axis.
+    pub(super) fn new(
+        resolution: f64,
+        origin: Point3<f64>,
+        seg: &Segment,
+        inv_dir: [f64; 3],
+        enabled: bool,
+    ) -> Clearance {
         let scale = (0..3).map(|a| seg.origin[a].abs().max(origin[a].abs())).fold(0.0, f64::max) + seg.length.abs();
         let enabled = enabled
             && (0..3).all(|a| seg.dir[a] == 0.0 || inv_dir[a].is_finite())

@@ -52,7 +52,7 @@ impl<'a> Walk<'a> {
         boxes: bool,
     ) -> Self {
         let inv_dir = [1.0 / seg.dir[0], 1.0 / seg.dir[1], 1.0 / seg.dir[2]];
-        let clearance = Clearance::new(resolution, origin, seg, boxes);
+        let clearance = Clearance::new(resolution, origin, seg, inv_dir, boxes);
         Walk { tree, resolution, origin, seg, lo, end, inv_resolution: 1.0 / resolution, inv_dir, clearance }
     }
 
@@ -255,7 +255,9 @@ impl<'a> Walk<'a> {
         for x in first[0]..=last[0] {
             for y in first[1]..=last[1] {
                 for z in first[2]..=last[2] {
-                    if self.tree.has_node([x, y, z]) && !self.node_is_cleared([x, y, z], ta, tb) {
+                    if let Some(mut boxes) = self.tree.node_cover([x, y, z])
+                        && !boxes.all(|b| self.clearance.clears(self.seg, ta, tb, &b))
+                    {
                         return false;
                     }
                 }
