@@ -20,9 +20,10 @@
 //! minimises paper eq. 5's negative log-likelihood, `½·Σ(ln det R + eᵀR⁻¹e)` (the
 //! printed equation carries a stray minus sign: it is the log-likelihood).
 //!
-//! The forward pass runs in `f32` on stack arrays: no allocation per candidate. Its
-//! `tanh` is a rational approximation within 1e-6 of the exact one (the training
-//! framework's), which lets each layer vectorize.
+//! The forward pass (`mlp`) runs in `f32` on stack arrays: no allocation per
+//! candidate. Its `tanh` is a rational approximation within 1e-6 of the exact one
+//! (the training framework's), which lets each layer vectorize; the numbers are the
+//! same bit for bit on every x86-64, whatever vector width it has.
 //! Weights come from bytes ([`Learned::from_bytes`]); the file is read by the
 //! binaries. A file that is truncated, corrupt, of another format or of the wrong
 //! shape is a [`LearnedModelError`] at load, never a failure later.
@@ -53,6 +54,7 @@
 //! assert!((r.matrix()[(1, 1)] - 0.01).abs() < 1e-8 && (r.matrix()[(0, 0)] - 0.04).abs() < 1e-8);
 //! ```
 
+use super::mlp::{Layers, MAX_WIDTH};
 use super::{Features, Sdsmm};
 use crate::math::{Cov2, Matrix2};
 
@@ -61,7 +63,7 @@ pub const LEARNED_INPUTS: usize = 7;
 /// Outputs: the Cholesky parameters (a, b, d).
 pub const LEARNED_OUTPUTS: usize = 3;
 /// Widest hidden layer a model file may have (the forward pass's stack arrays).
-pub const MAX_HIDDEN: usize = 64;
+pub const MAX_HIDDEN: usize = MAX_WIDTH;
 /// Range the log-diagonal outputs a and d are clamped to.
 pub const LOG_STD_RANGE: (f64, f64) = (-12.0, 4.0);
 
@@ -294,56 +296,6 @@ fn transpose(m: &[f32], rows: usize, cols: usize) -> Vec<f32> {
     (0..cols).flat_map(|c| (0..rows).map(move |r| m[r * cols + c])).collect()
 }
 
-/// Outputs computed together in [`layer`]: their sums stay in registers across the
-/// inputs instead of going through memory once per input.
-const BLOCK: usize = 16;
-
-/// `out = bias + Wᵀ-major weights · input` (`wt` is input-major: row i holds the
-/// weights of input i to every output). Each output is `bias + w₀x₀ + w₁x₁ + …` summed
-/// in input order, whatever the blocking: the same numbers as a plain loop.
-#[inline]
-fn layer(input: &[f32], wt: &[f32], bias: &[f32], out: &mut [f32]) {
-    let n = out.len();
-    let mut j = 0;
-    while j + BLOCK <= n {
-        let mut acc: [f32; BLOCK] = std::array::from_fn(|k| bias[j + k]);
-        for (x, row) in input.iter().zip(wt.chunks_exact(n)) {
-            let w: &[f32; BLOCK] = row[j..j + BLOCK].try_into().expect("a block of the row");
-            for k in 0..BLOCK {
-                acc[k] += w[k] * x;
-            }
-        }
-        out[j..j + BLOCK].copy_from_slice(&acc);
-        j += BLOCK;
-    }
-    for (k, o) in out.iter_mut().enumerate().skip(j) {
-        *o = bias[k];
-        for (x, row) in input.iter().zip(wt.chunks_exact(n)) {
-            *o += row[k] * x;
-        }
-    }
-}
-
-/// tanh in `f32` by a rational minimax approximation (Eigen's `ptanh_float`
-/// coefficients): branch-free, so a layer of them vectorizes; within 1e-6 of the
-/// exact value (checked in the tests), far below the model's own error.
-#[inline]
-fn fast_tanh(x: f32) -> f32 {
-    let x = x.clamp(-7.905_311, 7.905_311);
-    let x2 = x * x;
-    let mut p = x2 * -2.760_768_5e-16 + 2.000_188e-13;
-    p = p * x2 + -8.604_672e-11;
-    p = p * x2 + 5.122_297e-8;
-    p = p * x2 + 1.485_722_4e-5;
-    p = p * x2 + 6.372_619_3e-4;
-    p = p * x2 + 4.893_524_6e-3;
-    p *= x;
-    let mut q = x2 * 1.198_258_4e-6 + 1.185_347_1e-4;
-    q = q * x2 + 2.268_434_6e-3;
-    q = q * x2 + 4.893_525e-3;
-    p / q
-}
-
 impl Learned {
     /// Validates `weights`: sizes, finite values, positive input scales.
     pub fn new(weights: LearnedWeights) -> Result<Self, LearnedModelError> {
@@ -512,16 +464,17 @@ impl Learned {
     #[inline]
     pub fn forward(&self, input: &[f64; LEARNED_INPUTS]) -> [f64; LEARNED_OUTPUTS] {
         let w = &self.weights;
-        let h = w.hidden;
         let x: [f32; LEARNED_INPUTS] = std::array::from_fn(|i| (input[i] as f32 - w.input_mean[i]) / w.input_std[i]);
-        let mut h1 = [0f32; MAX_HIDDEN];
-        layer(&x, &self.t1, &w.b1, &mut h1[..h]);
-        h1[..h].iter_mut().for_each(|v| *v = fast_tanh(*v));
-        let mut h2 = [0f32; MAX_HIDDEN];
-        layer(&h1[..h], &self.t2, &w.b2, &mut h2[..h]);
-        h2[..h].iter_mut().for_each(|v| *v = fast_tanh(*v));
-        let mut out = [0f32; LEARNED_OUTPUTS];
-        layer(&h2[..h], &self.t3, &w.b3, &mut out);
+        let layers = Layers::<LEARNED_INPUTS, LEARNED_OUTPUTS> {
+            hidden: w.hidden,
+            t1: &self.t1,
+            b1: &w.b1,
+            t2: &self.t2,
+            b2: &w.b2,
+            t3: &self.t3,
+            b3: &w.b3,
+        };
+        let out = layers.forward(&x);
         out.map(f64::from)
     }
 }
@@ -596,39 +549,6 @@ mod tests {
         [o[0], o[1], o[2]]
     }
 
-    /// The plain loop [`layer`] blocks: each output summed in input order.
-    fn plain_layer(input: &[f32], wt: &[f32], bias: &[f32], out: &mut [f32]) {
-        out.copy_from_slice(bias);
-        for (x, row) in input.iter().zip(wt.chunks_exact(out.len())) {
-            for (o, w) in out.iter_mut().zip(row) {
-                *o += w * x;
-            }
-        }
-    }
-
-    #[test]
-    fn blocked_layer_is_the_plain_loop_bit_for_bit() {
-        let mut k = 1u32;
-        let mut next = || {
-            k = k.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (k >> 8) as f32 / (1u32 << 24) as f32 * 4.0 - 2.0
-        };
-        for (inputs, outputs) in [(7, 1), (7, 5), (7, 16), (7, 17), (48, 48), (64, 64), (64, 3), (33, 40)] {
-            for _ in 0..20 {
-                let input: Vec<f32> = (0..inputs).map(|_| next()).collect();
-                let wt: Vec<f32> = (0..inputs * outputs).map(|_| next()).collect();
-                let bias: Vec<f32> = (0..outputs).map(|_| next()).collect();
-                let (mut a, mut b) = (vec![0f32; outputs], vec![0f32; outputs]);
-                layer(&input, &wt, &bias, &mut a);
-                plain_layer(&input, &wt, &bias, &mut b);
-                assert_eq!(
-                    a.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-                    b.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
-                );
-            }
-        }
-    }
-
     #[test]
     fn forward_matches_the_definition() {
         for hidden in [1, 5, 32, MAX_HIDDEN] {
@@ -643,18 +563,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    #[test]
-    fn fast_tanh_is_within_1e6_of_tanh() {
-        let mut worst = 0f64;
-        for i in -200_000..=200_000 {
-            let x = i as f32 * 1e-4; // −20 … 20
-            worst = worst.max((f64::from(fast_tanh(x)) - f64::from(x).tanh()).abs());
-        }
-        assert!(worst < 1e-6, "{worst}");
-        assert_eq!(fast_tanh(0.0), 0.0);
-        assert!((fast_tanh(f32::INFINITY) - 1.0).abs() < 1e-6 && (fast_tanh(f32::NEG_INFINITY) + 1.0).abs() < 1e-6);
     }
 
     #[test]

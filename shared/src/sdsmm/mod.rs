@@ -25,6 +25,7 @@
 
 mod anisotropic;
 mod learned;
+mod mlp;
 mod paper;
 mod synthetic;
 

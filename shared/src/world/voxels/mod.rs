@@ -3,8 +3,11 @@
 //! The cells live in a sparse tree ([`tree`]: 64³ blocks of 8³ bricks of bits),
 //! shared between versions of a map, and a segment finds its first contact by
 //! walking that tree level by level ([`walk`]), exactly as a walk over every cell
-//! would: closed cubes, grazing counts. The design carries [`MAX_OCCUPIED_VOXELS`]
-//! cells at 1–3 bytes each on surfaces; `dyfos-bench octomap` measures it.
+//! would: closed cubes, grazing counts. Each brick and node keeps the box of its
+//! occupied cells ([`bounds`]), so the walk passes a block whose cells lie away
+//! from the segment (a floor under a sight line) without walking them. The design
+//! carries [`MAX_OCCUPIED_VOXELS`] cells at 1–3 bytes each on surfaces;
+//! `dyfos-bench octomap` measures it.
 //!
 //! ```
 //! use dyfos_shared::world::{Segment, VoxelGrid};
@@ -15,6 +18,8 @@
 //! assert_eq!(grid.first_contact(&ray), Some(2.0));
 //! ```
 
+mod bounds;
+mod cover;
 mod tree;
 mod walk;
 
@@ -302,7 +307,8 @@ impl VoxelGrid {
     /// with other versions of the same map.
     pub fn memory_bytes(&self) -> usize {
         let (root, nodes, bricks) = self.tree.counts();
-        root * 4 + nodes * (std::mem::size_of::<usize>() * 6 + 1024 + 80) + bricks * 66
+        // A brick: its slot, its cells' box and its bits.
+        root * 4 + nodes * (std::mem::size_of::<usize>() * 6 + 1024 + 80) + bricks * (2 + 4 + 64)
     }
 
     /// A 64-bit digest of resolution, origin and cells (FNV-1a over the bricks).
@@ -367,6 +373,12 @@ impl VoxelGrid {
     /// The smallest `t ∈ [0, seg.length]` at which the segment touches an occupied
     /// closed cell, or `None`. The segment's `end` is not applied. Allocates nothing.
     pub fn first_contact(&self, seg: &Segment) -> Option<f64> {
+        self.first_contact_with(seg, true)
+    }
+
+    /// [`VoxelGrid::first_contact`], passing blocks by their cells' boxes or not
+    /// (`boxes`): the same answer, bit for bit, either way.
+    fn first_contact_with(&self, seg: &Segment, boxes: bool) -> Option<f64> {
         let (lo, end) = self.tree.bounds()?;
         let (box_lo, box_hi) = self.aabb()?;
         let (mut t0, mut t1) = (0.0, seg.length.max(0.0));
@@ -383,7 +395,12 @@ impl VoxelGrid {
                 return None;
             }
         }
-        let walk = walk::Walk::new(&self.tree, self.resolution, self.origin, seg, lo, end);
+        let walk = walk::Walk::new(&self.tree, self.resolution, self.origin, seg, lo, end, boxes);
+        // A segment clear of the covers of the few nodes around it (a sight line
+        // above a floor) touches nothing: no walk.
+        if walk.clears_nodes(t0, t1) {
+            return None;
+        }
         let mut best = f64::INFINITY;
         // Each level's walk is exact on its own; the coarser ones only skip empty
         // space faster. A segment within a block or two of a level gains nothing

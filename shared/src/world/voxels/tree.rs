@@ -10,6 +10,8 @@
 //! map costs in proportion to the change.
 
 use super::CellIndex;
+use super::bounds::{BrickBox, CellBox};
+use super::cover::Cover;
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -61,6 +63,15 @@ fn rows_and_columns(y0: i64, y1: i64, z0: i64, z1: i64) -> u64 {
     rows & (((0xffu64 >> (7 - z1 + z0)) << z0) * 0x0101_0101_0101_0101)
 }
 
+/// A non-empty brick: its slot in the node, its cells' box and its bits. The box
+/// takes padding the slot left (the element is 72 bytes with or without it).
+#[derive(Clone, Debug)]
+struct Brick {
+    slot: u16,
+    bounds: BrickBox,
+    bits: Bits,
+}
+
 /// Up to 8³ bricks: 64³ cells.
 #[derive(Clone, Debug)]
 pub(super) struct Node {
@@ -68,8 +79,8 @@ pub(super) struct Node {
     pub(super) key: [i64; 3],
     /// Brick slot → 1 + its index in `bricks`; 0 for an empty brick.
     slots: [u16; SLOTS],
-    /// The non-empty bricks, with their slot.
-    bricks: Vec<(u16, Bits)>,
+    /// The non-empty bricks.
+    bricks: Vec<Brick>,
     /// Which bricks are non-empty, laid out as a brick's cells (word x, bit 8y + z):
     /// a box test over the bricks is then the same few word operations as over
     /// the cells of one brick.
@@ -80,46 +91,61 @@ pub(super) struct Node {
     /// inclusive; meaningless while `cells == 0`.
     lo: [i64; 3],
     hi: [i64; 3],
+    /// A few boxes holding the occupied cells; meaningless while `cells == 0`.
+    cover: Cover,
 }
 
 impl Node {
     fn new(key: [i64; 3]) -> Self {
-        Node { key, slots: [0; SLOTS], bricks: Vec::new(), present: [0; 8], cells: 0, lo: [0; 3], hi: [0; 3] }
+        Node {
+            key,
+            slots: [0; SLOTS],
+            bricks: Vec::new(),
+            present: [0; 8],
+            cells: 0,
+            lo: [0; 3],
+            hi: [0; 3],
+            cover: Cover::default(),
+        }
     }
 
     #[inline]
     fn brick(&self, slot: usize) -> Option<&Bits> {
         let i = self.slots[slot];
-        (i != 0).then(|| &self.bricks[usize::from(i) - 1].1)
+        (i != 0).then(|| &self.bricks[usize::from(i) - 1].bits)
     }
 
     /// Sets (`occupied`) or clears the cells of `bits` in brick `slot`.
     fn edit(&mut self, slot: usize, bits: &Bits, occupied: bool) {
         let i = self.slots[slot];
         if i == 0 {
-            if !occupied || bits.iter().all(|w| *w == 0) {
+            if !occupied {
                 return;
             }
-            self.bricks.push((slot as u16, *bits));
+            let Some(bounds) = BrickBox::of(bits) else { return };
+            self.bricks.push(Brick { slot: slot as u16, bounds, bits: *bits });
             self.slots[slot] = self.bricks.len() as u16;
             self.present[slot >> 6] |= 1 << (slot & 63);
             self.cells += bits.iter().map(|w| w.count_ones()).sum::<u32>();
             return;
         }
         let index = usize::from(i) - 1;
-        let brick = &mut self.bricks[index].1;
-        let before: u32 = brick.iter().map(|w| w.count_ones()).sum();
-        for (w, b) in brick.iter_mut().zip(bits) {
+        let brick = &mut self.bricks[index];
+        let before: u32 = brick.bits.iter().map(|w| w.count_ones()).sum();
+        for (w, b) in brick.bits.iter_mut().zip(bits) {
             *w = if occupied { *w | b } else { *w & !b };
         }
-        let after: u32 = brick.iter().map(|w| w.count_ones()).sum();
+        let after: u32 = brick.bits.iter().map(|w| w.count_ones()).sum();
         self.cells = self.cells + after - before;
+        if let Some(bounds) = BrickBox::of(&brick.bits) {
+            brick.bounds = bounds;
+        }
         if after == 0 {
             self.slots[slot] = 0;
             self.present[slot >> 6] &= !(1 << (slot & 63));
             self.bricks.swap_remove(index);
-            if let Some((moved, _)) = self.bricks.get(index) {
-                self.slots[usize::from(*moved)] = i;
+            if let Some(moved) = self.bricks.get(index) {
+                self.slots[usize::from(moved.slot)] = i;
             }
         }
     }
@@ -133,28 +159,28 @@ impl Node {
             bits[word] = 1 << bit;
             return self.edit(slot, &bits, occupied);
         }
-        let w = &mut self.bricks[usize::from(i) - 1].1[word];
-        if *w >> bit & 1 == 0 {
-            *w |= 1 << bit;
+        let brick = &mut self.bricks[usize::from(i) - 1];
+        if brick.bits[word] >> bit & 1 == 0 {
+            brick.bits[word] |= 1 << bit;
+            brick.bounds = brick.bounds.with([word as u32, bit >> 3, bit & 7]);
             self.cells += 1;
         }
     }
 
-    /// Recomputes the bounding box from the bricks.
+    /// Recomputes the bounding box and the cover from the bricks.
     fn refresh_bounds(&mut self) {
+        self.cover = Cover::of((0..SLOTS).filter_map(|slot| {
+            let i = self.slots[slot];
+            let s = slot as i64;
+            (i != 0).then(|| ([(s >> 6) * 8, (s >> 3 & 7) * 8, (s & 7) * 8], self.bricks[usize::from(i) - 1].bounds))
+        }));
         let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
-        for (slot, bits) in &self.bricks {
+        for Brick { slot, bounds, .. } in &self.bricks {
             let s = i64::from(*slot);
             let base = [(s >> 6) * 8, (s >> 3 & 7) * 8, (s & 7) * 8];
-            let xs = (0..8).fold(0u32, |a, x| a | u32::from(bits[x] != 0) << x);
-            let (first_x, last_x) = (i64::from(xs.trailing_zeros()), i64::from(31 - xs.leading_zeros()));
-            let yz = bits.iter().fold(0u64, |a, w| a | w);
-            let ys = (0..8).fold(0u32, |a, y| a | u32::from(yz >> (y * 8) & 0xff != 0) << y);
-            let (first_y, last_y) = (i64::from(ys.trailing_zeros()), i64::from(31 - ys.leading_zeros()));
-            let zs = (0..8).fold(0u64, |a, y| a | (yz >> (y * 8) & 0xff));
-            let (first_z, last_z) = (i64::from(zs.trailing_zeros()), i64::from(63 - zs.leading_zeros()));
-            let b_lo = [base[0] + first_x, base[1] + first_y, base[2] + first_z];
-            let b_hi = [base[0] + last_x, base[1] + last_y, base[2] + last_z];
+            let (first, last) = (bounds.lo(), bounds.hi());
+            let b_lo: [i64; 3] = std::array::from_fn(|a| base[a] + i64::from(first[a]));
+            let b_hi: [i64; 3] = std::array::from_fn(|a| base[a] + i64::from(last[a]));
             for a in 0..3 {
                 lo[a] = lo[a].min(b_lo[a]);
                 hi[a] = hi[a].max(b_hi[a]);
@@ -278,11 +304,29 @@ impl Tree {
         self.node(key).is_some()
     }
 
-    /// Whether the 8³ brick with brick key `key` (cell index >> 3) holds an occupied cell.
+    /// The boxes covering the occupied cells of the 64³ block with node key `key`,
+    /// or `None` when it has none.
     #[inline]
-    pub(super) fn has_brick(&self, key: [i64; 3]) -> bool {
-        self.node(key.map(|k| k >> (NODE_SHIFT - BRICK_SHIFT)))
-            .is_some_and(|n| n.slots[slot_of(key[0] & 7, key[1] & 7, key[2] & 7)] != 0)
+    pub(super) fn node_cover(&self, key: [i64; 3]) -> Option<impl Iterator<Item = CellBox> + '_> {
+        let node = self.node(key)?;
+        Some(node.cover.boxes(key.map(|k| k << NODE_SHIFT)))
+    }
+
+    /// The box of the occupied cells of the 8³ brick with brick key `key` (cell index
+    /// >> 3), or `None` when it has none.
+    #[inline]
+    pub(super) fn brick_box(&self, key: [i64; 3]) -> Option<CellBox> {
+        let node = self.node(key.map(|k| k >> (NODE_SHIFT - BRICK_SHIFT)))?;
+        let i = node.slots[slot_of(key[0] & 7, key[1] & 7, key[2] & 7)];
+        if i == 0 {
+            return None;
+        }
+        let bounds = node.bricks[usize::from(i) - 1].bounds;
+        let (lo, hi, base) = (bounds.lo(), bounds.hi(), key.map(|k| k << BRICK_SHIFT));
+        Some(CellBox {
+            lo: std::array::from_fn(|a| base[a] + i64::from(lo[a])),
+            hi: std::array::from_fn(|a| base[a] + i64::from(hi[a])),
+        })
     }
 
     /// Whether the 4³ block with key `key` (cell index >> 2) holds an occupied cell.
@@ -509,6 +553,28 @@ impl Tree {
         }
         (self.lo, self.dims, self.slots) = (lo, dims, slots);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+impl Tree {
+    /// Whether every brick's stored box is the box of its bits, every node's box the
+    /// box of its bricks' cells, and every node's cover holds each of its cells.
+    pub(super) fn boxes_are_tight(&self) -> bool {
+        self.nodes.iter().all(|node| {
+            let bricks_ok = node.bricks.iter().all(|b| BrickBox::of(&b.bits) == Some(b.bounds));
+            let base = node.key.map(|k| k << NODE_SHIFT);
+            let cells: Vec<CellIndex> = node.bricks_in_order().flat_map(|(min, bits)| cells_of(min, bits)).collect();
+            let node_ok = (0..3).all(|a| {
+                let lo = cells.iter().map(|c| c[a] - base[a]).min();
+                let hi = cells.iter().map(|c| c[a] - base[a]).max();
+                lo == Some(node.lo[a]) && hi == Some(node.hi[a])
+            });
+            let boxes: Vec<CellBox> = node.cover.boxes(base).collect();
+            let covered =
+                cells.iter().all(|c| boxes.iter().any(|b| (0..3).all(|a| b.lo[a] <= c[a] && c[a] <= b.hi[a])));
+            bricks_ok && node_ok && covered
+        })
     }
 }
 

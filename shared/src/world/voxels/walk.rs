@@ -13,6 +13,7 @@
 //! walking its cells.
 
 use super::CellIndex;
+use super::bounds::{CellBox, Clearance, MARGIN_CELLS};
 use super::tree::{BRICK_SHIFT, NODE_SHIFT, Tree};
 use crate::math::{Point3, floor};
 use crate::world::segment::{Segment, clip_slab};
@@ -30,6 +31,8 @@ pub(super) struct Walk<'a> {
     /// divisions are most of a short walk's cost.
     inv_resolution: f64,
     inv_dir: [f64; 3],
+    /// Whether the segment's part in a block clears the block's occupied cells.
+    clearance: Clearance,
 }
 
 /// log2 of a level's cell side, in cells: cells, 4³ quads, 8³ bricks, 64³ nodes.
@@ -46,18 +49,22 @@ impl<'a> Walk<'a> {
         seg: &'a Segment,
         lo: CellIndex,
         end: CellIndex,
+        boxes: bool,
     ) -> Self {
         let inv_dir = [1.0 / seg.dir[0], 1.0 / seg.dir[1], 1.0 / seg.dir[2]];
-        Walk { tree, resolution, origin, seg, lo, end, inv_resolution: 1.0 / resolution, inv_dir }
+        let clearance = Clearance::new(resolution, origin, seg, inv_dir, boxes);
+        Walk { tree, resolution, origin, seg, lo, end, inv_resolution: 1.0 / resolution, inv_dir, clearance }
     }
 
+    /// Whether block `c` of level `L` holds an occupied cell, and for bricks the box
+    /// of its occupied cells.
     #[inline(always)]
-    fn occupied<const L: usize>(&self, c: CellIndex) -> bool {
+    fn occupied<const L: usize>(&self, c: CellIndex) -> Option<Option<CellBox>> {
         match L {
-            0 => self.tree.get(c),
-            1 => self.tree.has_quad(c),
-            2 => self.tree.has_brick(c),
-            _ => self.tree.has_node(c),
+            0 => self.tree.get(c).then_some(None),
+            1 => self.tree.has_quad(c).then_some(None),
+            2 => self.tree.brick_box(c).map(Some),
+            _ => self.tree.has_node(c).then_some(None),
         }
     }
 
@@ -175,6 +182,90 @@ impl<'a> Walk<'a> {
         self.tree.any_in_box(lo, hi, 8) == Some(false)
     }
 
+    /// Whether passing block `c` of level `L` over the part `[ta, tb]` (which clears
+    /// its occupied cells) leaves every contact the walk finds as it was. A walk of
+    /// the block would also touch cells outside it where the part meets its faces:
+    /// at the part's ends, and all along it when the part lies in a face. Such a
+    /// contact belongs to a neighbouring block too, whose walk finds it as well, but
+    /// its `t` may differ there in the last bit. So the block is passed only when
+    /// the part lies in none of its faces and no cell touching either end (within
+    /// the clearance margin) is occupied.
+    fn nothing_at_the_ends<const L: usize>(&self, c: CellIndex, ta: f64, tb: f64) -> bool {
+        let delta = MARGIN_CELLS;
+        let cells = |t: f64| -> [f64; 3] {
+            let p = self.seg.point_at(t);
+            std::array::from_fn(|a| (p[a] - self.origin[a]) * self.inv_resolution)
+        };
+        let (a, b) = (cells(ta), cells(tb.max(ta)));
+        let side = (1i64 << SHIFTS[L]) as f64;
+        for i in 0..3 {
+            for plane in [c[i] as f64 * side, (c[i] + 1) as f64 * side] {
+                if (a[i] - plane).abs() < delta && (b[i] - plane).abs() < delta {
+                    return false;
+                }
+            }
+        }
+        for g in [a, b] {
+            let lo: [i64; 3] = std::array::from_fn(|i| floor(g[i] - delta) as i64);
+            let hi: [i64; 3] = std::array::from_fn(|i| floor(g[i] + delta) as i64);
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        if self.tree.get([x, y, z]) {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    /// Whether the part `[ta, tb]` clears every box of node `key`'s cover.
+    #[inline]
+    fn node_is_cleared(&self, key: CellIndex, ta: f64, tb: f64) -> bool {
+        self.tree.node_cover(key).is_some_and(|mut boxes| boxes.all(|b| self.clearance.clears(self.seg, ta, tb, &b)))
+    }
+
+    /// Whether the part `[ta, tb]` clears the covers of every node near it (a few
+    /// at most): then it touches no occupied cell, and needs no walk.
+    pub(super) fn clears_nodes(&self, ta: f64, tb: f64) -> bool {
+        if !self.clearance.enabled() {
+            return false;
+        }
+        let (a, b) = (self.seg.point_at(ta), self.seg.point_at(tb));
+        let mut first = [0i64; 3];
+        let mut last = [0i64; 3];
+        for i in 0..3 {
+            // The cells near the part's box, one more on each side for rounding.
+            let to_cell = |v: f64| floor((v - self.origin[i]) * self.inv_resolution);
+            let (l, h) = (to_cell(a[i].min(b[i])) - 1.0, to_cell(a[i].max(b[i])) + 1.0);
+            if !(l.is_finite() && h.is_finite()) {
+                return false;
+            }
+            let (l, h) = (l.max((self.lo[i] - 1) as f64) as i64, h.min(self.end[i] as f64) as i64);
+            if l > h {
+                return true;
+            }
+            (first[i], last[i]) = (l >> NODE_SHIFT, h >> NODE_SHIFT);
+        }
+        if (0..3).map(|i| last[i] - first[i] + 1).product::<i64>() > 8 {
+            return false;
+        }
+        for x in first[0]..=last[0] {
+            for y in first[1]..=last[1] {
+                for z in first[2]..=last[2] {
+                    if let Some(mut boxes) = self.tree.node_cover([x, y, z])
+                        && !boxes.all(|b| self.clearance.clears(self.seg, ta, tb, &b))
+                    {
+                        return false;
+                    }
+                }
+            }
+        }
+        true
+    }
+
     /// Checks `cell` and the cells reached from it by un-stepping any subset of the
     /// `tied` axes or moving to the lower twin on `twin` axes, all touched at `t`: a
     /// contact at the finest level, a walk of the next level inside a coarser one.
@@ -207,9 +298,9 @@ impl<'a> Walk<'a> {
                     c[a] -= if tied[a] { step[a] } else { 1 };
                 }
             }
-            if !self.occupied::<L>(c) {
+            let Some(cells) = self.occupied::<L>(c) else {
                 continue;
-            }
+            };
             if L == 0 {
                 *best = best.min(t.min(t1));
                 return;
@@ -228,6 +319,15 @@ impl<'a> Walk<'a> {
             }
             let exit = if inside { tb.max(t) } else { t };
             let end = exit.min(t1).min(*best);
+            // A part that stays clear of the block's occupied cells (a sight line
+            // above a floor slab, beside a wall) is passed without walking them.
+            let clear = match L {
+                3 => self.node_is_cleared(c, t, end),
+                _ => cells.is_some_and(|cells| self.clearance.clears(self.seg, t, end, &cells)),
+            };
+            if clear && self.nothing_at_the_ends::<L>(c, t, end) {
+                continue;
+            }
             // The cells around that part of the segment, when few, settle it at once.
             if L >= 2 && self.part_is_clear(t, end) {
                 continue;
