@@ -12,6 +12,7 @@
 //! static file still being created with no tag in any node's directory has no
 //! living creator, and removing it lets the next open create the service afresh.
 
+use iceoryx2::config::Config;
 use iceoryx2::node::Node;
 use iceoryx2::service::Service;
 use iceoryx2::service::messaging_pattern::MessagingPattern;
@@ -25,6 +26,32 @@ use std::path::PathBuf;
 /// `INIT_PERMISSIONS`); a finished one is read-only.
 const BEING_CREATED: u32 = 0o600;
 
+/// Where iceoryx2 keeps the static file of service `name` (`pattern`) under `config`.
+pub fn static_file<S: Service>(config: &Config, name: &ServiceName, pattern: MessagingPattern) -> PathBuf {
+    let global = &config.global;
+    PathBuf::from(global.service_dir().to_string()).join(file_name::<S>(
+        config,
+        name,
+        pattern,
+        &global.service.static_config_storage_suffix,
+    ))
+}
+
+/// The name of the tag a node's directory holds for each service it created or opened.
+fn tag_name<S: Service>(config: &Config, name: &ServiceName, pattern: MessagingPattern) -> String {
+    file_name::<S>(config, name, pattern, &config.global.node.service_tag_suffix)
+}
+
+fn file_name<S: Service>(
+    config: &Config,
+    name: &ServiceName,
+    pattern: MessagingPattern,
+    suffix: &dyn std::fmt::Display,
+) -> String {
+    let hash = ServiceHash::new::<S::ServiceNameHasher>(name, pattern);
+    format!("{}{}{suffix}", config.global.prefix, hash.as_str())
+}
+
 /// Removes the static file of service `name` (`pattern`) if its creator died
 /// before finishing it. Cleans up dead nodes first, so a dead creator's tag is gone.
 /// Returns whether a file was removed; a service being created by a living
@@ -35,12 +62,8 @@ pub fn remove_abandoned_creation<S: Service>(
     pattern: MessagingPattern,
 ) -> io::Result<bool> {
     node.try_cleanup_dead_nodes();
-    let global = &node.config().global;
-    let hash = ServiceHash::new::<S::ServiceNameHasher>(name, pattern);
-    let prefix = global.prefix.to_string();
-    let file_name = |suffix: &dyn std::fmt::Display| format!("{prefix}{}{suffix}", hash.as_str());
-    let static_file =
-        PathBuf::from(global.service_dir().to_string()).join(file_name(&global.service.static_config_storage_suffix));
+    let config = node.config();
+    let static_file = static_file::<S>(config, name, pattern);
     let metadata = match std::fs::metadata(&static_file) {
         Ok(m) => m,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(false),
@@ -49,8 +72,8 @@ pub fn remove_abandoned_creation<S: Service>(
     if !metadata.is_file() || metadata.permissions().mode() & 0o777 != BEING_CREATED {
         return Ok(false);
     }
-    let tag = file_name(&global.node.service_tag_suffix);
-    let nodes = match std::fs::read_dir(global.node_dir().to_string()) {
+    let tag = tag_name::<S>(config, name, pattern);
+    let nodes = match std::fs::read_dir(config.global.node_dir().to_string()) {
         Ok(nodes) => nodes,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return remove(&static_file),
         Err(e) => return Err(e),
@@ -61,6 +84,24 @@ pub fn remove_abandoned_creation<S: Service>(
         }
     }
     remove(&static_file)
+}
+
+/// [`remove_abandoned_creation`] for a process that could not open `name`: logs
+/// what it removed, or why it could not check, and returns whether opening again
+/// is worth it.
+#[cfg(feature = "logging")]
+pub fn recover<S: Service>(node: &Node<S>, name: &ServiceName, pattern: MessagingPattern) -> bool {
+    match remove_abandoned_creation(node, name, pattern) {
+        Ok(true) => {
+            tracing::warn!(service = %name, "removed what a process killed while creating this service left behind");
+            true
+        }
+        Ok(false) => false,
+        Err(e) => {
+            tracing::warn!(service = %name, "cannot check whether this service's creator died: {e}");
+            false
+        }
+    }
 }
 
 fn remove(file: &std::path::Path) -> io::Result<bool> {
@@ -88,12 +129,8 @@ mod tests {
 
     /// The file a process killed while creating `name` leaves behind.
     fn leave_half_created(node: &Node<Ipc>, name: &ServiceName, pattern: MessagingPattern) -> PathBuf {
-        let global = &node.config().global;
-        let hash = ServiceHash::new::<<Ipc as Service>::ServiceNameHasher>(name, pattern);
-        let dir = PathBuf::from(global.service_dir().to_string());
-        std::fs::create_dir_all(&dir).unwrap();
-        let file =
-            dir.join(format!("{}{}{}", global.prefix, hash.as_str(), global.service.static_config_storage_suffix));
+        let file = static_file::<Ipc>(node.config(), name, pattern);
+        std::fs::create_dir_all(file.parent().unwrap()).unwrap();
         File::create(&file).unwrap();
         std::fs::set_permissions(&file, Permissions::from_mode(BEING_CREATED)).unwrap();
         file
@@ -127,13 +164,12 @@ mod tests {
         let file = leave_half_created(&node, &name, MessagingPattern::PublishSubscribe);
         // The living creator's tag, written before the static file.
         let global = &node.config().global;
-        let hash = ServiceHash::new::<<Ipc as Service>::ServiceNameHasher>(&name, MessagingPattern::PublishSubscribe);
         let node_dir = std::fs::read_dir(global.node_dir().to_string())
             .unwrap()
             .map(|d| d.unwrap().path())
             .find(|d| d.join(format!("{}node{}", global.prefix, global.node.static_config_suffix)).exists())
             .expect("the living node's directory");
-        let tag = node_dir.join(format!("{}{}{}", global.prefix, hash.as_str(), global.node.service_tag_suffix));
+        let tag = node_dir.join(tag_name::<Ipc>(node.config(), &name, MessagingPattern::PublishSubscribe));
         File::create(&tag).unwrap();
         assert!(!remove_abandoned_creation(&node, &name, MessagingPattern::PublishSubscribe).unwrap());
         assert!(file.exists());

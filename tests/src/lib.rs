@@ -157,18 +157,11 @@ impl Sandbox {
         name: &str,
         pattern: iceoryx2::service::messaging_pattern::MessagingPattern,
     ) -> PathBuf {
-        use iceoryx2::service::Service;
         use std::os::unix::fs::PermissionsExt;
-        type Ipc = iceoryx2::prelude::ipc::Service;
         let config = dyfos_shared::wire::services::iceoryx_config(Some(&self.domain)).expect("domain");
-        let global = &config.global;
         let name = iceoryx2::prelude::ServiceName::new(name).expect("service name");
-        let hash =
-            iceoryx2::service::service_hash::ServiceHash::new::<<Ipc as Service>::ServiceNameHasher>(&name, pattern);
-        let dir = PathBuf::from(global.service_dir().to_string());
-        std::fs::create_dir_all(&dir).expect("service directory");
-        let file =
-            dir.join(format!("{}{}{}", global.prefix, hash.as_str(), global.service.static_config_storage_suffix));
+        let file = dyfos_process::abandoned::static_file::<iceoryx2::prelude::ipc::Service>(&config, &name, pattern);
+        std::fs::create_dir_all(file.parent().expect("service directory")).expect("service directory");
         std::fs::File::create(&file).expect("static file");
         std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600)).expect("permissions");
         file

@@ -21,7 +21,7 @@
 
 use dyfos_client::Ipc;
 use dyfos_client::iceoryx_config;
-use dyfos_process::abandoned::remove_abandoned_creation;
+use dyfos_process::abandoned::recover;
 use dyfos_shared::wire::mission::topic_name;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -32,7 +32,6 @@ use iceoryx2::service::messaging_pattern::MessagingPattern;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
 use std::fmt::Debug;
 use std::time::{Duration, Instant};
-use tracing::warn;
 
 /// A topic's publish-subscribe service, its event service and its name.
 type Pair<T> = (String, PubSubFactory<Ipc, T, ()>, iceoryx2::service::port_factory::event::PortFactory<Ipc>);
@@ -151,15 +150,7 @@ impl Topics {
                     for (service, pattern) in
                         [(&service_name, MessagingPattern::PublishSubscribe), (&event_name, MessagingPattern::Event)]
                     {
-                        match remove_abandoned_creation(&self.node, service, pattern) {
-                            Ok(true) => {
-                                warn!(service = %service, "removed what a process killed while creating this service left behind")
-                            }
-                            Ok(false) => {}
-                            Err(e) => {
-                                warn!(service = %service, "cannot check whether this service's creator died: {e}")
-                            }
-                        }
+                        recover(&self.node, service, pattern);
                     }
                 }
                 _ => std::thread::sleep(Duration::from_millis(10)),

@@ -5,7 +5,7 @@
 
 use super::error::{DaemonCreateError, IpcError};
 use super::rendezvous::Connected;
-use dyfos_process::abandoned::remove_abandoned_creation;
+use dyfos_process::abandoned::recover;
 use dyfos_shared::limits::SNAPSHOT_PAGE_RECORDS;
 use dyfos_shared::wire::ServiceNames;
 use dyfos_shared::wire::map::{MapReplyHeader, MapRequestHeader, WireDelta};
@@ -19,7 +19,7 @@ use iceoryx2::port::server::Server;
 use iceoryx2::prelude::*;
 use iceoryx2::service::messaging_pattern::MessagingPattern;
 use iceoryx2::service::port_factory::server::ServerCreateError;
-use tracing::{debug, info, warn};
+use tracing::{debug, info};
 
 type RendezvousServer = Server<Ipc, [WireDelta], RendezvousRequestHeader, RendezvousReply, ()>;
 type MapServer = Server<Ipc, [WireDelta], MapRequestHeader, [WireDelta], MapReplyHeader>;
@@ -82,17 +82,9 @@ fn recovering<T, E>(
     if first.is_ok() {
         return Ok(first);
     }
-    let Ok(service) = ServiceName::new(name) else { return Ok(first) };
-    match remove_abandoned_creation(node, &service, pattern) {
-        Ok(true) => {
-            warn!(service = name, "removed what a process killed while creating this service left behind");
-            open()
-        }
-        Ok(false) => Ok(first),
-        Err(e) => {
-            warn!(service = name, "cannot check whether this service's creator died: {e}");
-            Ok(first)
-        }
+    match ServiceName::new(name) {
+        Ok(service) if recover(node, &service, pattern) => open(),
+        _ => Ok(first),
     }
 }
 
