@@ -99,6 +99,11 @@ pub const MAX_FRAME: usize = 4096;
 /// Longest sleep of a forwarding thread, so that a stop is noticed.
 const NAP: Duration = Duration::from_millis(100);
 
+/// How long a stopping link waits for its forwarding threads, then for Zenoh to
+/// close the session: a put blocked on a peer that stopped reading, or a peer that
+/// never answers the close, must not keep the process from exiting on SIGTERM.
+const STOP_GRACE: Duration = Duration::from_secs(3);
+
 /// Which host a link runs on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Side {
@@ -709,10 +714,13 @@ impl Link {
 
     fn shutdown(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
-        for t in self.threads.drain(..) {
-            let _ = t.join();
+        let stuck = dyfos_process::shutdown::join_within(std::mem::take(&mut self.threads), STOP_GRACE);
+        if !stuck.is_empty() {
+            tracing::warn!("stopping: {} did not stop within {STOP_GRACE:?}; left behind", stuck.join(", "));
         }
-        let _ = self.session.close().wait();
+        if let Err(e) = self.session.close().timeout(STOP_GRACE).wait() {
+            tracing::warn!("stopping: the Zenoh session did not close cleanly: {e}");
+        }
     }
 }
 

@@ -82,13 +82,25 @@ fn build_binaries() -> Result<(), String> {
 }
 
 /// Polls `done` until it returns `Some`, panicking with `what` after [`PATIENCE`].
-pub fn wait_for<T>(what: &str, mut done: impl FnMut() -> Option<T>) -> T {
+pub fn wait_for<T>(what: &str, done: impl FnMut() -> Option<T>) -> T {
+    wait_for_showing(what, String::new, done)
+}
+
+/// What [`wait_for_showing`] shows of a process: its log file as it is then.
+pub fn log_of(path: &Path) -> impl Fn() -> String + use<> {
+    let path = path.to_path_buf();
+    move || format!("its log:\n{}", std::fs::read_to_string(&path).unwrap_or_default())
+}
+
+/// [`wait_for`], with `context()` (say, the log of the process waited for) in the
+/// panic message, read when the patience runs out.
+pub fn wait_for_showing<T>(what: &str, context: impl Fn() -> String, mut done: impl FnMut() -> Option<T>) -> T {
     let start = Instant::now();
     loop {
         if let Some(v) = done() {
             return v;
         }
-        assert!(start.elapsed() < PATIENCE, "timed out waiting for {what}");
+        assert!(start.elapsed() < PATIENCE, "timed out waiting for {what}\n{}", context());
         std::thread::sleep(Duration::from_millis(2));
     }
 }
@@ -335,7 +347,7 @@ impl DaemonProcess {
     /// Sends `signal_name` (`TERM`, `INT`), then waits for the exit.
     pub fn stop_with(&mut self, signal_name: &str) -> ExitStatus {
         signal(self.pid(), signal_name);
-        wait_for(&format!("dyfosd to exit after SIG{signal_name}"), || self.child.try_wait())
+        wait_for_showing(&format!("dyfosd to exit after SIG{signal_name}"), log_of(&self.log), || self.child.try_wait())
     }
 
     /// Whether the process has not exited.

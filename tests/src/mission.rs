@@ -15,7 +15,7 @@
 //! ```
 
 use crate::hosts::{Hosts, ROVER, VIEWER};
-use crate::{KillOnDrop, Sandbox, bin, wait_for};
+use crate::{KillOnDrop, Sandbox, bin, log_of, wait_for_showing};
 use dyfos_mission::eval::{MissionTrace, Recorder};
 use dyfos_mission::mission::Mission;
 use dyfos_mission::mission::log::read_events;
@@ -234,7 +234,7 @@ impl Robot {
     /// Waits (at most [`crate::PATIENCE`]) for the exit.
     pub fn wait_exit(&mut self) -> ExitStatus {
         assert!(self.child.child_mut().is_some(), "still running");
-        wait_for("a mission process to exit", || self.child.try_wait())
+        wait_for_showing("a mission process to exit", log_of(&self.log), || self.child.try_wait())
     }
 
     /// `Some(status)` if it has exited.
