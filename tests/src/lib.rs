@@ -20,7 +20,7 @@ use dyfos_client::{Client, ClientConfig};
 use dyfos_service::launch::DyfosdCommand;
 use dyfos_shared::world::World;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitStatus};
+use std::process::{Command, ExitStatus, Stdio};
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
@@ -91,6 +91,16 @@ pub fn wait_for<T>(what: &str, mut done: impl FnMut() -> Option<T>) -> T {
         assert!(start.elapsed() < PATIENCE, "timed out waiting for {what}");
         std::thread::sleep(Duration::from_millis(2));
     }
+}
+
+/// Polls the daemon's stats through `client` until `done` holds of them, panicking
+/// with `what` after [`PATIENCE`]; returns the stats that did.
+pub fn wait_for_stats(
+    client: &mut Client,
+    what: &str,
+    done: impl Fn(&dyfos_shared::wire::stats::DaemonStats) -> bool,
+) -> dyfos_shared::wire::stats::DaemonStats {
+    wait_for(what, || Some(client.stats(PATIENCE).expect("stats")).filter(|s| done(s)))
 }
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
@@ -178,6 +188,23 @@ impl Sandbox {
         let mut cmd = Command::new(bin("dyfos"));
         cmd.arg(subcommand).args(self.dyfos_flags());
         cmd
+    }
+
+    /// Starts `dyfos query FILE --algo brute ARGS` against this sandbox's daemon, its
+    /// output piped.
+    pub fn brute_query(&self, file: &Path, args: &[&str]) -> std::process::Child {
+        let mut query = self.dyfos("query");
+        query.arg(file).args(["--algo", "brute"]).args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
+        query.spawn().expect("start dyfos query")
+    }
+
+    /// A sandbox for test `test` with `dyfosd` (no flags) running in it. Bind it as
+    /// `let (sandbox, _daemon) = …`, so that the daemon is killed before the sandbox
+    /// removes its files.
+    pub fn with_daemon(test: &str) -> (Sandbox, DaemonProcess) {
+        let sandbox = Sandbox::new(test);
+        let daemon = sandbox.start_daemon(&[]);
+        (sandbox, daemon)
     }
 
     /// Starts `dyfosd` for this sandbox, logging at `debug`, and waits until it answers.

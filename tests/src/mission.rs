@@ -209,6 +209,17 @@ impl<'a> MissionFiles<'a> {
         })
         .expect("open the recorder")
     }
+
+    /// Runs mission `name` to its end, unpaced, with `seed`: the recorder, a viewer
+    /// searching with dyfos (`viewer_extra`), the rover (`rover_extra`); both must
+    /// exit 0. Returns the rover, the viewer and the recorded trace.
+    pub fn run(&self, name: &str, seed: u64, viewer_extra: &[&str], rover_extra: &[&str]) -> (Robot, Robot, MissionTrace) {
+        let recorder = self.recorder(name);
+        let mut viewer = self.viewer(name, "dyfos", seed, viewer_extra);
+        let mut rover = self.rover(name, seed, "0", rover_extra);
+        let trace = finish(recorder, &mut rover, &mut viewer);
+        (rover, viewer, trace)
+    }
 }
 
 impl Drop for MissionFiles<'_> {
@@ -283,6 +294,15 @@ pub fn record_until_exit(mut recorder: Recorder, rover: &mut Robot) -> (ExitStat
         assert!(start.elapsed() < crate::PATIENCE, "the rover did not finish:\n{}", rover.log());
         recorder.wait(Duration::from_millis(20));
     }
+}
+
+/// Records the mission until the rover exits; the rover, then the viewer must exit
+/// 0. Returns the trace.
+pub fn finish(recorder: Recorder, rover: &mut Robot, viewer: &mut Robot) -> MissionTrace {
+    let (status, trace) = record_until_exit(recorder, rover);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    trace
 }
 
 /// The events named `event`, as (step, event) pairs in log order.
