@@ -218,10 +218,14 @@ impl Sandbox {
         self.start_serving_with(&[], map, world)
     }
 
-    /// A daemon with two workers (so one `brute` search may take both) and the world
-    /// of [`slow_search_scenario`] as map 1, and a client.
-    pub fn start_slow(&self) -> (DaemonProcess, Client) {
-        self.start_serving_with(&["--workers", "2"], 1, &slow_search_scenario().world)
+    /// A sandbox for test `test` with a daemon of two workers (so one `brute` search
+    /// may take both) and the world of [`slow_search_scenario`] as map 1, and a
+    /// client. Bound as `let (sandbox, daemon, client) = …`, they drop in the right
+    /// order.
+    pub fn with_slow_daemon(test: &str) -> (Sandbox, DaemonProcess, Client) {
+        let sandbox = Sandbox::new(test);
+        let (daemon, client) = sandbox.start_serving_with(&["--workers", "2"], 1, &slow_search_scenario().world);
+        (sandbox, daemon, client)
     }
 
     fn start_serving_with(

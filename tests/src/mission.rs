@@ -213,12 +213,33 @@ impl<'a> MissionFiles<'a> {
     /// Runs mission `name` to its end, unpaced, with `seed`: the recorder, a viewer
     /// searching with dyfos (`viewer_extra`), the rover (`rover_extra`); both must
     /// exit 0. Returns the rover, the viewer and the recorded trace.
-    pub fn run(&self, name: &str, seed: u64, viewer_extra: &[&str], rover_extra: &[&str]) -> (Robot, Robot, MissionTrace) {
-        let recorder = self.recorder(name);
-        let mut viewer = self.viewer(name, "dyfos", seed, viewer_extra);
-        let mut rover = self.rover(name, seed, "0", rover_extra);
+    pub fn run(
+        &self,
+        name: &str,
+        seed: u64,
+        viewer_extra: &[&str],
+        rover_extra: &[&str],
+    ) -> (Robot, Robot, MissionTrace) {
+        let (recorder, mut viewer, mut rover) = self.start(name, seed, "0", viewer_extra, rover_extra);
         let trace = finish(recorder, &mut rover, &mut viewer);
         (rover, viewer, trace)
+    }
+
+    /// Starts mission `name` with `seed`: the recorder, a viewer searching with
+    /// dyfos (`viewer_extra`), the rover at `time_scale` (`rover_extra`). Returns
+    /// them in that order.
+    pub fn start(
+        &self,
+        name: &str,
+        seed: u64,
+        time_scale: &str,
+        viewer_extra: &[&str],
+        rover_extra: &[&str],
+    ) -> (Recorder, Robot, Robot) {
+        let recorder = self.recorder(name);
+        let viewer = self.viewer(name, "dyfos", seed, viewer_extra);
+        let rover = self.rover(name, seed, time_scale, rover_extra);
+        (recorder, viewer, rover)
     }
 }
 

@@ -47,8 +47,7 @@ fn start_doomed_query(sandbox: &Sandbox, admin: &mut Client) -> (KillOnDrop, Tem
 
 #[test]
 fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
-    let sandbox = Sandbox::new("abandon-kill");
-    let (daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, daemon, mut admin) = Sandbox::with_slow_daemon("abandon-kill");
     let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
     assert_eq!(abandoned(&mut admin), 0, "a search whose client is there goes on");
     child.kill(); // SIGKILL, and reap
@@ -76,8 +75,7 @@ fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
 
 #[test]
 fn a_client_that_stops_waiting_abandons_its_query() {
-    let sandbox = Sandbox::new("abandon-timeout");
-    let (_daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, _daemon, mut admin) = Sandbox::with_slow_daemon("abandon-timeout");
     let mut impatient = sandbox.client();
     // The client gives up long before the search could end and drops its pending
     // response; no dead-node cleanup is needed to see that.
@@ -97,8 +95,7 @@ fn a_client_that_stops_waiting_abandons_its_query() {
 /// counted, the count stayed at 1 and the wait below ran out.
 #[test]
 fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
-    let sandbox = Sandbox::new("abandon-queued");
-    let (_daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, _daemon, mut admin) = Sandbox::with_slow_daemon("abandon-queued");
     let raw = RawClient::open(&sandbox);
     let dyfos =
         RendezvousRequest { algorithm: Algorithm::Dyfos, deadline: Some(Duration::from_secs(600)), ..brute(None) };
@@ -111,7 +108,9 @@ fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
 
     drop(queued);
     drop(running_dyfos);
-    wait_for_stats(&mut admin, "the running search to be abandoned and the dropped queued query skipped", |s| s.queries_abandoned == 2 && s.running == 1 && s.queued == 0);
+    wait_for_stats(&mut admin, "the running search to be abandoned and the dropped queued query skipped", |s| {
+        s.queries_abandoned == 2 && s.running == 1 && s.queued == 0
+    });
     let stats = admin.stats(PATIENCE).unwrap();
     assert_eq!((stats.queries_served, stats.requests_failed), (0, 0), "{stats:?}");
 
@@ -125,8 +124,7 @@ fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
 /// answered at once, so its waits never run a cleanup either.
 #[test]
 fn the_daemon_cleans_up_after_a_killed_client_by_itself() {
-    let sandbox = Sandbox::new("abandon-janitor");
-    let (daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, daemon, mut admin) = Sandbox::with_slow_daemon("abandon-janitor");
     let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
     child.kill(); // SIGKILL, and reap
     wait_for_stats(&mut admin, "the orphaned search to be abandoned", |s| s.queries_abandoned == 1);

@@ -40,8 +40,7 @@ fn answered(pending: &[PendingRendezvous]) -> usize {
 
 #[test]
 fn cheap_requests_are_answered_while_every_worker_searches() {
-    let sandbox = Sandbox::new("cheap-first");
-    let (_daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, _daemon, mut admin) = Sandbox::with_slow_daemon("cheap-first");
 
     // Two raw clients, each connected (one round trip) before anything is timed by
     // order. The first sends a brute search (it may hold all workers but one) and
@@ -76,7 +75,9 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
     wait_for_stats(&mut admin, "the second client's query to queue", |s| s.queued == 2);
     let mut pending = pending;
     drop(pending.remove(1));
-    wait_for_stats(&mut admin, "the given-up search to be abandoned and a worker to take the next query", |s| s.queries_abandoned == 1 && s.running == 2 && s.queued == 1);
+    wait_for_stats(&mut admin, "the given-up search to be abandoned and a worker to take the next query", |s| {
+        s.queries_abandoned == 1 && s.running == 2 && s.queued == 1
+    });
     // So the second client's search is the one running: giving it up abandons a
     // search. (First come, first served, it would still be queued, behind the
     // first client's, and nothing would be abandoned.) A worker that took it but was
@@ -98,8 +99,7 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
 /// holding, the short query waits for a greedy search to end and this test fails.
 #[test]
 fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
-    let sandbox = Sandbox::new("hold");
-    let (_daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, _daemon, mut admin) = Sandbox::with_slow_daemon("hold");
     let example = dyfos_tests::scenario("example.json");
     admin.upload_map(2, &example.world, false, PATIENCE).unwrap();
 
@@ -115,7 +115,9 @@ fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
     assert_eq!(answer.map_version, admin.snapshot(2, PATIENCE).unwrap().version());
     assert_eq!(answered(&pending), 0, "a greedy search finished first");
     // The held search went on: two of the greedy client's run, one waits.
-    wait_for_stats(&mut admin, "the held search to go on", |s| s.running == 2 && s.queued == 1 && s.queries_served == 1);
+    wait_for_stats(&mut admin, "the held search to go on", |s| {
+        s.running == 2 && s.queued == 1 && s.queries_served == 1
+    });
 
     drop(pending);
     wait_for_stats(&mut admin, "the searches to be abandoned", |s| s.running == 0 && s.queued == 0);

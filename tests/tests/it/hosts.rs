@@ -46,6 +46,13 @@ fn links(hosts: &Hosts, files: &MissionFiles, name: &str) -> [Robot; 2] {
     [files.link_on(hosts, ROVER, name, &[]), files.link_on(hosts, VIEWER, name, &[])]
 }
 
+/// Stops each link; each must exit cleanly.
+fn stop_links(links: &mut [Robot]) {
+    for link in links {
+        stop_link(link);
+    }
+}
+
 /// Stops a link, which must exit cleanly; returns its log.
 fn stop_link(link: &mut Robot) -> String {
     let status = link.terminate();
@@ -455,9 +462,7 @@ fn a_two_host_mission_ends_as_promptly_as_a_one_host_one() {
     );
     let rover_log = rover.log();
     assert!(warnings(&rover_log).is_empty(), "the rover warned:\n{rover_log}");
-    for link in &mut links {
-        stop_link(link);
-    }
+    stop_links(&mut links);
 }
 
 /// The viewer's host is cut off while the rover drives its last leg, so that the
@@ -504,9 +509,7 @@ fn the_finish_reaches_a_viewer_that_was_away_at_the_goal() {
     );
     let viewer_events = viewer.events();
     assert!(viewer_events.iter().any(|e| e["event"] == "finished"), "{viewer_events:#?}");
-    for link in &mut links {
-        stop_link(link);
-    }
+    stop_links(&mut links);
 }
 
 /// 300 connections held open without a word by a host without the credentials:

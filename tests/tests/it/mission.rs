@@ -114,12 +114,10 @@ fn a_killed_viewer_leaves_the_rover_finishing_on_dead_reckoning() {
     let (sandbox, _daemon) = Sandbox::with_daemon("mission-kill");
     let mission = small_mission();
     let files = MissionFiles::new(&sandbox, &mission);
-    let mut recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 3, &[]);
     // Paced at 10× so that the mission is still under way when the viewer dies; a
     // long measurement timeout, so that finishing in time needs the rover to notice
     // the dead viewer rather than wait it out.
-    let mut rover = files.rover("m", 3, "10", &["--measurement-timeout", "60"]);
+    let (mut recorder, mut viewer, mut rover) = files.start("m", 3, "10", &[], &["--measurement-timeout", "60"]);
     // Kill the viewer once the rover has used its first measurement.
     let start = Instant::now();
     while recorder.trace().updates() == 0 {
@@ -252,9 +250,7 @@ fn the_example_mission_file_runs_in_the_demo_format() {
 fn a_killed_rover_lets_the_viewer_leave() {
     let (sandbox, _daemon) = Sandbox::with_daemon("mission-rover-kill");
     let files = MissionFiles::new(&sandbox, &small_mission());
-    let mut recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 4, &[]);
-    let mut rover = files.rover("m", 4, "10", &[]);
+    let (mut recorder, mut viewer, mut rover) = files.start("m", 4, "10", &[], &[]);
     let start = Instant::now();
     while recorder.trace().updates() == 0 {
         assert!(start.elapsed() < PATIENCE, "no first update:\n{}", rover.log());
@@ -328,12 +324,10 @@ fn the_rover_and_viewer_say_at_exit_what_their_log_left_out() {
     use dyfos_shared::wire::mission::{AckMsg, ROVER_ACK_TOPIC, VIEWER_ACK_TOPIC};
     let (sandbox, _daemon) = Sandbox::with_daemon("mission-log-exit");
     let files = MissionFiles::new(&sandbox, &small_mission());
-    let mut recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 3, &[]);
     // At 2× the last leg lasts a few seconds: the flood comes during it, most
     // likely in the log's last window (if a window ends meanwhile, its summary is
     // written anyway, and the counts must still add up).
-    let mut rover = files.rover("m", 3, "2", &[]);
+    let (mut recorder, mut viewer, mut rover) = files.start("m", 3, "2", &[], &[]);
     let n = small_mission().waypoints.len() as u32;
     let start = Instant::now();
     while recorder.trace().step() < n {

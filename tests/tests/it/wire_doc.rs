@@ -549,8 +549,8 @@ fn documented_operations_modes_algorithms_models_and_stops_are_the_rust_ones() {
     }
 
     let decoded = decoded_codes(|m| {
-        let (_, mode) = RendezvousRequest::decode(&RendezvousRequestHeader { mode: m, ..valid_rendezvous_header() }, &[])
-            .ok()?;
+        let (_, mode) =
+            RendezvousRequest::decode(&RendezvousRequestHeader { mode: m, ..valid_rendezvous_header() }, &[]).ok()?;
         let name = match mode {
             Mode::Solve => "solve",
             Mode::Check => "check",
