@@ -564,26 +564,23 @@ impl RawClient {
         use iceoryx2::prelude::*;
         let (node, names) = sandbox.ipc_node();
         let services = services::Services::new(&node, &names);
-        let rendezvous = services
-            .rendezvous()
-            .expect("service name")
-            .open()
-            .expect("open rendezvous")
-            .client_builder()
-            .initial_max_slice_len(8)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
-            .create()
-            .expect("rendezvous client");
-        let map = services
-            .map()
-            .expect("service name")
-            .open()
-            .expect("open map")
-            .client_builder()
-            .initial_max_slice_len(8)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
-            .create()
-            .expect("map client");
+        // Both request services carry a slice of records: one way to open a client.
+        macro_rules! slice_client {
+            ($service:ident) => {
+                services
+                    .$service()
+                    .expect("service name")
+                    .open()
+                    .expect(concat!("open ", stringify!($service)))
+                    .client_builder()
+                    .initial_max_slice_len(8)
+                    .allocation_strategy(AllocationStrategy::PowerOfTwo)
+                    .create()
+                    .expect(concat!(stringify!($service), " client"))
+            };
+        }
+        let rendezvous = slice_client!(rendezvous);
+        let map = slice_client!(map);
         let wake = services
             .wake()
             .expect("service name")
