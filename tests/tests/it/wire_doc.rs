@@ -590,29 +590,38 @@ fn documented_operations_modes_algorithms_models_and_stops_are_the_rust_ones() {
     same_codes(&all, "stop", "stop reasons", &decoded);
 }
 
-/// The wire value of parameter `name` in `w`: exhaustive over [`WireParams::FIELDS`]
-/// (a new parameter panics here until the test and the document know it).
+/// The wire value of parameter `name` in `w` as numbers (`t_vs` as its three), for
+/// every parameter of the one list in `dyfos_shared::params` (a parameter the
+/// document lacks fails the table check below).
 fn param_values(w: &WireParams, name: &str) -> Vec<f64> {
-    match name {
-        "rover_radius" => vec![w.rover_radius],
-        "marker_size" => vec![w.marker_size],
-        "marker_height" => vec![w.marker_height],
-        "viewer_radius" => vec![w.viewer_radius],
-        "safety_margin" => vec![w.safety_margin],
-        "z_min" => vec![w.z_min],
-        "z_max" => vec![w.z_max],
-        "camera_pitch" => vec![w.camera_pitch],
-        "t_vs" => w.t_vs.to_vec(),
-        "f_h" => vec![w.f_h],
-        "f_v" => vec![w.f_v],
-        "rho_min" => vec![w.rho_min],
-        "rho_max" => vec![w.rho_max],
-        "kappa" => vec![w.kappa],
-        "lambda" => vec![w.lambda],
-        "perimeter_points" => vec![f64::from(w.perimeter_points)],
-        "model" => vec![f64::from(w.model)],
-        other => panic!("parameter `{other}` is new: add it to this test and to docs/wire.md"),
+    /// A wire field's numbers.
+    trait Numbers {
+        fn numbers(&self) -> Vec<f64>;
     }
+    impl Numbers for f64 {
+        fn numbers(&self) -> Vec<f64> {
+            vec![*self]
+        }
+    }
+    impl Numbers for u32 {
+        fn numbers(&self) -> Vec<f64> {
+            vec![f64::from(*self)]
+        }
+    }
+    impl Numbers for [f64; 3] {
+        fn numbers(&self) -> Vec<f64> {
+            self.to_vec()
+        }
+    }
+    macro_rules! values {
+        ($($(#[doc = $doc:literal])* #[wire($slot:literal)] $name:ident: $ty:ty = $default:expr,)*) => {
+            match name {
+                $(stringify!($name) => w.$name.numbers(),)*
+                other => panic!("no parameter `{other}`"),
+            }
+        };
+    }
+    dyfos_shared::spec_params!(values)
 }
 
 #[test]
