@@ -28,10 +28,8 @@
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-root="$(cd "$here/.." && pwd)"
 # shellcheck source=scripts/venv.sh
-source "$root/scripts/venv.sh"
-target="${CARGO_TARGET_DIR:-$root/target}"
+source "$here/../scripts/venv.sh"
 # Absolute: the builds below run in other directories.
 prepare=0
 if [ "${1:-}" = "--prepare" ]; then

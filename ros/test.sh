@@ -12,12 +12,11 @@
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-root="$(cd "$here/.." && pwd)"
-target="${CARGO_TARGET_DIR:-$root/target}"
+# shellcheck source=scripts/venv.sh
+source "$here/../scripts/venv.sh"
 venv="$target/ros-venv"
 
-# --all-targets as scripts/test builds, so the features match and nothing is built twice.
-(cd "$root" && cargo build --quiet --workspace --all-targets)
+build_workspace
 DYFOS_BINDING="$target/debug/lib_dyfos.so" bash "$here/install.sh" "$venv"
 if ! "$venv/bin/python" -c "import pytest" 2>/dev/null; then
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "pytest>=7"
@@ -29,10 +28,4 @@ unset RMW_IMPLEMENTATION ROS_DOMAIN_ID ROS_LOCALHOST_ONLY
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST ROS_LOG_DIR="$target/ros-log"
 export DYFOSD="$target/debug/dyfosd" DYFOS="$target/debug/dyfos" DYFOS_TEST_DATA="$root/tests/data"
 export DYFOS_ROS="$venv/bin/dyfos-ros"
-status=0
-(cd "$here/dyfos_ros" && "$venv/bin/python" -m pytest test -q -p no:cacheprovider "$@") || status=$?
-if [ "$status" -eq 5 ]; then
-    echo "ros/test.sh: pytest collected no tests" >&2
-    exit 1
-fi
-exit "$status"
+run_pytest ros/test.sh "$here/dyfos_ros" "$venv/bin/python" test -p no:cacheprovider "$@"

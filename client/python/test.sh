@@ -21,10 +21,8 @@
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-root="$(cd "$here/../.." && pwd)"
 # shellcheck source=scripts/venv.sh
-source "$root/scripts/venv.sh"
-target="${CARGO_TARGET_DIR:-$root/target}"
+source "$here/../../scripts/venv.sh"
 venv="$target/py-venv"
 maturin=0
 if [ "${1:-}" = "--maturin" ]; then
@@ -37,9 +35,8 @@ if [ "$maturin" = 1 ] && [ ! -x "$venv/bin/maturin" ]; then
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "maturin>=1.9.4,<2"
 fi
 
-# The daemon and CLI under test (a no-op after scripts/test's build; --all-targets
-# as there, so the features match and nothing is built twice).
-(cd "$root" && cargo build --quiet --workspace --all-targets)
+# The daemon and CLI under test.
+build_workspace
 
 if [ "$maturin" = 1 ]; then
     # Build the extension module and install the package into the venv (editable).
@@ -61,10 +58,4 @@ else
 fi
 
 export DYFOSD="$target/debug/dyfosd" DYFOS="$target/debug/dyfos" DYFOS_TEST_DATA="$root/tests/data"
-status=0
-(cd "$here" && "$venv/bin/python" -m pytest tests -q "$@") || status=$?
-if [ "$status" -eq 5 ]; then
-    echo "client/python/test.sh: pytest collected no tests" >&2
-    exit 1
-fi
-exit "$status"
+run_pytest client/python/test.sh "$here" "$venv/bin/python" tests "$@"

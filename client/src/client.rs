@@ -778,5 +778,16 @@ mod tests {
             assert!(message.contains("in iceoryx2 domain `dyt_robot_`"), "{message}");
             assert!(message.contains("`dyfosd --prefix p/ --domain dyt_robot_`"), "{message}");
         }
+        // Word for word, as the two messages have always read.
+        assert_eq!(
+            open.to_string(),
+            "no dyfosd serves `p/rendezvous` in iceoryx2 domain `dyt_robot_` (waited 0ns); start one with \
+             `dyfosd --prefix p/ --domain dyt_robot_`, or pass the prefix and domain it uses"
+        );
+        assert_eq!(
+            request.to_string(),
+            "no dyfosd serves `p/rendezvous` in iceoryx2 domain `dyt_robot_`; start one with \
+             `dyfosd --prefix p/ --domain dyt_robot_` (retryable)"
+        );
     }
 }

@@ -44,11 +44,7 @@ pub enum ClientOpenError {
     #[error("iceoryx2 domain `{0}` is not a valid file-name prefix; use letters, digits and `_`")]
     InvalidDomain(String),
     /// No daemon serves this prefix.
-    #[error(
-        "no dyfosd serves `{service}` in {} (waited {waited:?}); start one with `dyfosd --prefix {prefix}{}`, or pass the prefix and domain it uses",
-        in_domain(domain.as_deref()),
-        domain_flag(domain.as_deref())
-    )]
+    #[error("{}, or pass the prefix and domain it uses", no_daemon(service, prefix, domain.as_deref(), Some(*waited)))]
     NoDaemon {
         /// The service tried.
         service: String,
@@ -74,14 +70,16 @@ pub enum ClientOpenError {
     Ipc(#[source] IpcFailure),
 }
 
-/// "iceoryx2 domain `d`", or the default domain, for messages.
-fn in_domain(domain: Option<&str>) -> String {
-    domain.map_or_else(|| "the default iceoryx2 domain".to_string(), |d| format!("iceoryx2 domain `{d}`"))
-}
-
-/// The `dyfosd` flag that selects the domain, if not the default.
-fn domain_flag(domain: Option<&str>) -> String {
-    domain.map_or_else(String::new, |d| format!(" --domain {d}"))
+/// What both errors of a missing daemon say first: no dyfosd serves `service` in
+/// the domain (waited how long, if given), and the `dyfosd` command that would.
+fn no_daemon(service: &str, prefix: &str, domain: Option<&str>, waited: Option<Duration>) -> String {
+    let in_domain =
+        domain.map_or_else(|| "the default iceoryx2 domain".to_string(), |d| format!("iceoryx2 domain `{d}`"));
+    let waited = waited.map_or_else(String::new, |w| format!(" (waited {w:?})"));
+    let domain_flag = domain.map_or_else(String::new, |d| format!(" --domain {d}"));
+    format!(
+        "no dyfosd serves `{service}` in {in_domain}{waited}; start one with `dyfosd --prefix {prefix}{domain_flag}`"
+    )
 }
 
 /// A request's failure, before it is named by operation.
@@ -112,11 +110,7 @@ macro_rules! request_error {
             #[error(transparent)]
             Connect(#[from] ClientOpenError),
             /// No daemon serves the prefix: it is not running or is restarting.
-            #[error(
-                "no dyfosd serves `{service}` in {}; start one with `dyfosd --prefix {prefix}{}` (retryable)",
-                in_domain(domain.as_deref()),
-                domain_flag(domain.as_deref())
-            )]
+            #[error("{} (retryable)", no_daemon(service, prefix, domain.as_deref(), None))]
             NoDaemon {
                 /// The service.
                 service: String,

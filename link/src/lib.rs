@@ -191,6 +191,20 @@ pub struct LinkStats {
     pub dropped: u64,
 }
 
+/// What a thread carrying one topic needs: this host's topics, the mission, the
+/// topic's key on the link and its group and name here, and the link's stop flag,
+/// counters and session.
+struct Route {
+    topics: TopicsConfig,
+    mission: String,
+    key: String,
+    group: String,
+    topic: String,
+    stop: Arc<AtomicBool>,
+    counters: Arc<Counters>,
+    session: zenoh::Session,
+}
+
 #[derive(Debug, Default)]
 struct Counters {
     sent: AtomicU64,
@@ -492,8 +506,11 @@ impl Link {
         link.forward::<MeasurementMsg>(config, !rover_side, MISSION, MEASUREMENT_TOPIC)?;
         link.forward::<AckMsg>(config, !rover_side, MISSION, VIEWER_ACK_TOPIC)?;
         if rover_side {
-            link.send_out::<EstimateMsg>(config, MISSION, ESTIMATE_TOPIC, Box::new(Some))?;
-            link.take_in::<EvaluationAckMsg>(config, MISSION, EVALUATION_TOPIC, Box::new(|o, m| o.send(m)))?;
+            link.send_out::<EstimateMsg>(link.route(config, MISSION, ESTIMATE_TOPIC), Box::new(Some))?;
+            link.take_in::<EvaluationAckMsg>(
+                link.route(config, MISSION, EVALUATION_TOPIC),
+                Box::new(|o, m| o.send(m)),
+            )?;
         } else {
             // The evaluations on this host: the last estimate's readers, and their
             // acknowledgements, answered for together.
@@ -518,10 +535,10 @@ impl Link {
                 }
                 Ok(readers)
             });
-            link.take_in::<EstimateMsg>(config, MISSION, ESTIMATE_TOPIC, hand)?;
+            link.take_in::<EstimateMsg>(link.route(config, MISSION, ESTIMATE_TOPIC), hand)?;
             let pass: Pass<EvaluationAckMsg> =
                 Box::new(move |ack| evaluations.lock().unwrap_or_else(|p| p.into_inner()).acknowledged(ack));
-            link.send_out::<EvaluationAckMsg>(config, MISSION, EVALUATION_TOPIC, pass)?;
+            link.send_out::<EvaluationAckMsg>(link.route(config, MISSION, EVALUATION_TOPIC), pass)?;
         }
         // The heartbeats last: the rover and the viewer start their mission once
         // they hear each other, and by then every other topic crosses.
@@ -577,27 +594,34 @@ impl Link {
         group: &str,
         topic: &str,
     ) -> Result<(), LinkStartError> {
+        let route = self.route(config, group, topic);
         if out {
-            self.send_out::<T>(config, group, topic, Box::new(Some))
+            self.send_out::<T>(route, Box::new(Some))
         } else {
-            self.take_in::<T>(config, group, topic, Box::new(|outbox, msg| outbox.send(msg)))
+            self.take_in::<T>(route, Box::new(|outbox, msg| outbox.send(msg)))
+        }
+    }
+
+    /// What the thread carrying `group/topic` needs of `config` and of the link.
+    fn route(&self, config: &LinkConfig, group: &str, topic: &str) -> Route {
+        let mission = config.topics.mission.clone();
+        Route {
+            topics: config.topics.clone(),
+            key: key_expr(&mission, group, topic),
+            mission,
+            group: group.to_string(),
+            topic: topic.to_string(),
+            stop: self.stop.clone(),
+            counters: self.counters.clone(),
+            session: self.session.clone(),
         }
     }
 
     /// Starts the thread reading `group/topic` on this host and putting what `pass`
     /// lets through on the link.
-    fn send_out<T: LinkMessage>(
-        &mut self,
-        config: &LinkConfig,
-        group: &str,
-        topic: &str,
-        mut pass: Pass<T>,
-    ) -> Result<(), LinkStartError> {
-        let mission = config.topics.mission.clone();
-        let key = key_expr(&mission, group, topic);
-        let (stop, counters, session) = (self.stop.clone(), self.counters.clone(), self.session.clone());
-        let (group, name, topic) = (group.to_string(), format!("link->{topic}"), topic.to_string());
-        self.spawn(config, &name, move |topics, ready| {
+    fn send_out<T: LinkMessage>(&mut self, route: Route, mut pass: Pass<T>) -> Result<(), LinkStartError> {
+        let Route { topics: config, mission, key, group, topic, stop, counters, session } = route;
+        self.spawn(config, &format!("link->{topic}"), move |topics, ready| {
             let opened =
                 topics.inbox::<T>(&group, &topic, MAX_BUFFER).map_err(LinkStartError::from).and_then(|inbox| {
                     session
@@ -624,18 +648,9 @@ impl Link {
 
     /// Starts the thread taking `group/topic` from the link and handing each valid
     /// message to this host with `hand`.
-    fn take_in<T: LinkMessage>(
-        &mut self,
-        config: &LinkConfig,
-        group: &str,
-        topic: &str,
-        mut hand: Hand<T>,
-    ) -> Result<(), LinkStartError> {
-        let mission = config.topics.mission.clone();
-        let key = key_expr(&mission, group, topic);
-        let (stop, counters, session) = (self.stop.clone(), self.counters.clone(), self.session.clone());
-        let (group, name, topic) = (group.to_string(), format!("link-<{topic}"), topic.to_string());
-        self.spawn(config, &name, move |topics, ready| {
+    fn take_in<T: LinkMessage>(&mut self, route: Route, mut hand: Hand<T>) -> Result<(), LinkStartError> {
+        let Route { topics: config, mission, key, group, topic, stop, counters, session } = route;
+        self.spawn(config, &format!("link-<{topic}"), move |topics, ready| {
             let opened = topics.outbox::<T>(&group, &topic).map_err(LinkStartError::from).and_then(|outbox| {
                 session
                     .declare_subscriber(key.clone())
@@ -672,11 +687,10 @@ impl Link {
     /// opened.
     fn spawn(
         &mut self,
-        config: &LinkConfig,
+        topics_config: TopicsConfig,
         name: &str,
         body: impl FnOnce(Topics, &std::sync::mpsc::Sender<Result<(), LinkStartError>>) + Send + 'static,
     ) -> Result<(), LinkStartError> {
-        let topics_config = config.topics.clone();
         let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), LinkStartError>>();
         let thread = std::thread::Builder::new()
             .name(name.to_string())

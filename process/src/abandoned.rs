@@ -127,21 +127,21 @@ mod tests {
         NodeBuilder::new().config(&config).create::<Ipc>().unwrap()
     }
 
-    /// The file a process killed while creating `name` leaves behind.
-    fn leave_half_created(node: &Node<Ipc>, name: &ServiceName, pattern: MessagingPattern) -> PathBuf {
-        let file = static_file::<Ipc>(node.config(), name, pattern);
+    /// A node of a domain of this test's own (`test` and the pid), and the file a
+    /// process killed while creating service `name` left behind there.
+    fn half_created(test: &str, name: &str, pattern: MessagingPattern) -> (Node<Ipc>, ServiceName, PathBuf) {
+        let node = node(&format!("{test}{}", std::process::id()));
+        let name = ServiceName::new(name).unwrap();
+        let file = static_file::<Ipc>(node.config(), &name, pattern);
         std::fs::create_dir_all(file.parent().unwrap()).unwrap();
         File::create(&file).unwrap();
         std::fs::set_permissions(&file, Permissions::from_mode(BEING_CREATED)).unwrap();
-        file
+        (node, name, file)
     }
 
     #[test]
     fn a_service_whose_creator_died_is_created_afresh() {
-        let domain = format!("abandon{}", std::process::id());
-        let node = node(&domain);
-        let name = ServiceName::new("dyfos-test/abandoned").unwrap();
-        let file = leave_half_created(&node, &name, MessagingPattern::Event);
+        let (node, name, file) = half_created("abandon", "dyfos-test/abandoned", MessagingPattern::Event);
         let hangs = node.service_builder(&name).event().open_or_create();
         assert!(
             matches!(hangs, Err(EventOpenOrCreateError::EventOpenError(EventOpenError::HangsInCreation))),
@@ -158,10 +158,8 @@ mod tests {
 
     #[test]
     fn a_service_a_living_node_is_creating_is_left_alone() {
-        let domain = format!("creating{}", std::process::id());
-        let node = node(&domain);
-        let name = ServiceName::new("dyfos-test/being-created").unwrap();
-        let file = leave_half_created(&node, &name, MessagingPattern::PublishSubscribe);
+        let (node, name, file) =
+            half_created("creating", "dyfos-test/being-created", MessagingPattern::PublishSubscribe);
         // The living creator's tag, written before the static file.
         let global = &node.config().global;
         let node_dir = std::fs::read_dir(global.node_dir().to_string())

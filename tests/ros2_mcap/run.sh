@@ -11,24 +11,16 @@
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
-root="$(cd "$here/../.." && pwd)"
 # shellcheck source=scripts/venv.sh
-source "$root/scripts/venv.sh"
-target="${CARGO_TARGET_DIR:-$root/target}"
+source "$here/../../scripts/venv.sh"
 venv="$target/ros2-mcap-venv"
 
 venv_with "$venv" "pytest, mcap, mcap_ros2" "pytest>=7" "mcap>=1.1,<2" "mcap-ros2-support>=0.5,<1"
 
-# The demo and the processes it starts (a no-op after scripts/test's build).
-(cd "$root" && cargo build --quiet --workspace --all-targets)
+# The demo and the processes it starts.
+build_workspace
 
 # No __pycache__ in the source tree.
 export PYTHONDONTWRITEBYTECODE=1
 export DYFOS="$target/debug/dyfos" DYFOS_TEST_DATA="$root/tests/data"
-status=0
-(cd "$here" && "$venv/bin/python" -m pytest -q -p no:cacheprovider "$@") || status=$?
-if [ "$status" -eq 5 ]; then
-    echo "tests/ros2_mcap/run.sh: pytest collected no tests" >&2
-    exit 1
-fi
-exit "$status"
+run_pytest tests/ros2_mcap/run.sh "$here" "$venv/bin/python" -p no:cacheprovider "$@"

@@ -20,7 +20,7 @@ use dyfos_client::{Client, ClientConfig};
 use dyfos_service::launch::DyfosdCommand;
 use dyfos_shared::world::World;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitStatus};
+use std::process::{Command, ExitStatus, Stdio};
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
@@ -103,6 +103,16 @@ pub fn wait_for_showing<T>(what: &str, context: impl Fn() -> String, mut done: i
         assert!(start.elapsed() < PATIENCE, "timed out waiting for {what}\n{}", context());
         std::thread::sleep(Duration::from_millis(2));
     }
+}
+
+/// Polls the daemon's stats through `client` until `done` holds of them, panicking
+/// with `what` after [`PATIENCE`]; returns the stats that did.
+pub fn wait_for_stats(
+    client: &mut Client,
+    what: &str,
+    done: impl Fn(&dyfos_shared::wire::stats::DaemonStats) -> bool,
+) -> dyfos_shared::wire::stats::DaemonStats {
+    wait_for(what, || Some(client.stats(PATIENCE).expect("stats")).filter(|s| done(s)))
 }
 
 static NEXT: AtomicU32 = AtomicU32::new(0);
@@ -192,6 +202,23 @@ impl Sandbox {
         cmd
     }
 
+    /// Starts `dyfos query FILE --algo brute ARGS` against this sandbox's daemon, its
+    /// output piped.
+    pub fn brute_query(&self, file: &Path, args: &[&str]) -> std::process::Child {
+        let mut query = self.dyfos("query");
+        query.arg(file).args(["--algo", "brute"]).args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
+        query.spawn().expect("start dyfos query")
+    }
+
+    /// A sandbox for test `test` with `dyfosd` (no flags) running in it. Bind it as
+    /// `let (sandbox, _daemon) = …`, so that the daemon is killed before the sandbox
+    /// removes its files.
+    pub fn with_daemon(test: &str) -> (Sandbox, DaemonProcess) {
+        let sandbox = Sandbox::new(test);
+        let daemon = sandbox.start_daemon(&[]);
+        (sandbox, daemon)
+    }
+
     /// Starts `dyfosd` for this sandbox, logging at `debug`, and waits until it answers.
     pub fn start_daemon(&self, extra: &[&str]) -> DaemonProcess {
         self.start_daemon_logging("debug", extra)
@@ -203,10 +230,14 @@ impl Sandbox {
         self.start_serving_with(&[], map, world)
     }
 
-    /// A daemon with two workers (so one `brute` search may take both) and the world
-    /// of [`slow_search_scenario`] as map 1, and a client.
-    pub fn start_slow(&self) -> (DaemonProcess, Client) {
-        self.start_serving_with(&["--workers", "2"], 1, &slow_search_scenario().world)
+    /// A sandbox for test `test` with a daemon of two workers (so one `brute` search
+    /// may take both) and the world of [`slow_search_scenario`] as map 1, and a
+    /// client. Bound as `let (sandbox, daemon, client) = …`, they drop in the right
+    /// order.
+    pub fn with_slow_daemon(test: &str) -> (Sandbox, DaemonProcess, Client) {
+        let sandbox = Sandbox::new(test);
+        let (daemon, client) = sandbox.start_serving_with(&["--workers", "2"], 1, &slow_search_scenario().world);
+        (sandbox, daemon, client)
     }
 
     fn start_serving_with(
@@ -545,26 +576,23 @@ impl RawClient {
         use iceoryx2::prelude::*;
         let (node, names) = sandbox.ipc_node();
         let services = services::Services::new(&node, &names);
-        let rendezvous = services
-            .rendezvous()
-            .expect("service name")
-            .open()
-            .expect("open rendezvous")
-            .client_builder()
-            .initial_max_slice_len(8)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
-            .create()
-            .expect("rendezvous client");
-        let map = services
-            .map()
-            .expect("service name")
-            .open()
-            .expect("open map")
-            .client_builder()
-            .initial_max_slice_len(8)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
-            .create()
-            .expect("map client");
+        // Both request services carry a slice of records: one way to open a client.
+        macro_rules! slice_client {
+            ($service:ident) => {
+                services
+                    .$service()
+                    .expect("service name")
+                    .open()
+                    .expect(concat!("open ", stringify!($service)))
+                    .client_builder()
+                    .initial_max_slice_len(8)
+                    .allocation_strategy(AllocationStrategy::PowerOfTwo)
+                    .create()
+                    .expect(concat!(stringify!($service), " client"))
+            };
+        }
+        let rendezvous = slice_client!(rendezvous);
+        let map = slice_client!(map);
         let wake = services
             .wake()
             .expect("service name")

@@ -209,6 +209,38 @@ impl<'a> MissionFiles<'a> {
         })
         .expect("open the recorder")
     }
+
+    /// Runs mission `name` to its end, unpaced, with `seed`: the recorder, a viewer
+    /// searching with dyfos (`viewer_extra`), the rover (`rover_extra`); both must
+    /// exit 0. Returns the rover, the viewer and the recorded trace.
+    pub fn run(
+        &self,
+        name: &str,
+        seed: u64,
+        viewer_extra: &[&str],
+        rover_extra: &[&str],
+    ) -> (Robot, Robot, MissionTrace) {
+        let (recorder, mut viewer, mut rover) = self.start(name, seed, "0", viewer_extra, rover_extra);
+        let trace = finish(recorder, &mut rover, &mut viewer);
+        (rover, viewer, trace)
+    }
+
+    /// Starts mission `name` with `seed`: the recorder, a viewer searching with
+    /// dyfos (`viewer_extra`), the rover at `time_scale` (`rover_extra`). Returns
+    /// them in that order.
+    pub fn start(
+        &self,
+        name: &str,
+        seed: u64,
+        time_scale: &str,
+        viewer_extra: &[&str],
+        rover_extra: &[&str],
+    ) -> (Recorder, Robot, Robot) {
+        let recorder = self.recorder(name);
+        let viewer = self.viewer(name, "dyfos", seed, viewer_extra);
+        let rover = self.rover(name, seed, time_scale, rover_extra);
+        (recorder, viewer, rover)
+    }
 }
 
 impl Drop for MissionFiles<'_> {
@@ -283,6 +315,15 @@ pub fn record_until_exit(mut recorder: Recorder, rover: &mut Robot) -> (ExitStat
         assert!(start.elapsed() < crate::PATIENCE, "the rover did not finish:\n{}", rover.log());
         recorder.wait(Duration::from_millis(20));
     }
+}
+
+/// Records the mission until the rover exits; the rover, then the viewer must exit
+/// 0. Returns the trace.
+pub fn finish(recorder: Recorder, rover: &mut Robot, viewer: &mut Robot) -> MissionTrace {
+    let (status, trace) = record_until_exit(recorder, rover);
+    assert!(status.success(), "rover failed:\n{}", rover.log());
+    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    trace
 }
 
 /// The events named `event`, as (step, event) pairs in log order.

@@ -76,6 +76,21 @@ def _numbers(n: int) -> Callable[[Any], Optional[str]]:
     return check
 
 
+def _text(what: str, empty: bool = True) -> Callable[[Any], Optional[str]]:
+    """A string (not empty unless `empty`)."""
+    return lambda v: None if isinstance(v, str) and (empty or v) else f"must be {what}"
+
+
+def _positive(unit: str) -> Callable[[Any], Optional[str]]:
+    """A finite number of `unit` above 0."""
+    return lambda v: None if _is_number(v) and v > 0 else f"must be {unit} > 0"
+
+
+def _not_negative(unit: str) -> Callable[[Any], Optional[str]]:
+    """A finite number of `unit`, 0 or more."""
+    return lambda v: None if _is_number(v) and v >= 0 else f"must be {unit} >= 0"
+
+
 def _optional(check: Callable[[Any], Optional[str]]) -> Callable[[Any], Optional[str]]:
     return lambda v: None if v is None else check(v)
 
@@ -101,18 +116,8 @@ class Param(NamedTuple):
 
 
 PARAMETERS: Dict[str, Param] = {
-    "prefix": Param(
-        dyfos.DEFAULT_PREFIX,
-        True,
-        lambda v: None if isinstance(v, str) and v else "must be a service prefix",
-        "the daemon's --prefix",
-    ),
-    "domain": Param(
-        "",
-        True,
-        lambda v: None if isinstance(v, str) else "must be a string",
-        "the daemon's --domain (iceoryx2 domain); empty: the default",
-    ),
+    "prefix": Param(dyfos.DEFAULT_PREFIX, True, _text("a service prefix", empty=False), "the daemon's --prefix"),
+    "domain": Param("", True, _text("a string"), "the daemon's --domain (iceoryx2 domain); empty: the default"),
     "map_id": Param(
         1,
         False,
@@ -132,57 +137,30 @@ PARAMETERS: Dict[str, Param] = {
         "search seed for ~/belief",
     ),
     "deadline": Param(
-        0.0,
-        False,
-        lambda v: None if _is_number(v) and v >= 0 else "must be seconds >= 0",
-        "seconds the daemon may search for ~/belief; 0: no deadline",
+        0.0, False, _not_negative("seconds"), "seconds the daemon may search for ~/belief; 0: no deadline"
     ),
     "timeout": Param(
         60.0,
         False,
-        lambda v: None if _is_number(v) and v > 0 else "must be seconds > 0",
+        _positive("seconds"),
         "how long the node waits for the daemon's answer beyond a request's deadline",
     ),
     "frame_id": Param(
-        "map",
-        False,
-        lambda v: None if isinstance(v, str) and v else "must be a frame name",
-        "the world frame beliefs, answers, maps and markers are in",
+        "map", False, _text("a frame name", empty=False), "the world frame beliefs, answers, maps and markers are in"
     ),
-    "octomap_topic": Param(
-        "octomap_binary",
-        True,
-        lambda v: None if isinstance(v, str) else "must be a topic name",
-        "octomap_msgs/Octomap maps; empty: none",
-    ),
+    "octomap_topic": Param("octomap_binary", True, _text("a topic name"), "octomap_msgs/Octomap maps; empty: none"),
     "cloud_topic": Param(
-        "",
-        True,
-        lambda v: None if isinstance(v, str) else "must be a topic name",
-        "sensor_msgs/PointCloud2 of occupied-cell centres; empty: none",
+        "", True, _text("a topic name"), "sensor_msgs/PointCloud2 of occupied-cell centres; empty: none"
     ),
-    "cloud_resolution": Param(
-        0.05,
-        False,
-        lambda v: None if _is_number(v) and v > 0 else "must be metres > 0",
-        "the cell side of maps from cloud_topic",
-    ),
+    "cloud_resolution": Param(0.05, False, _positive("metres"), "the cell side of maps from cloud_topic"),
     "bounds": Param(
-        None,
-        False,
-        _optional(_numbers(4)),
-        "x_min, y_min, x_max, y_max of maps from topics (required for them)",
+        None, False, _optional(_numbers(4)), "x_min, y_min, x_max, y_max of maps from topics (required for them)"
     ),
     "sun": Param(
         None, False, _optional(_numbers(2)), "elevation, azimuth (rad) of maps from topics (required for them)"
     ),
     "origin": Param([0.0, 0.0, 0.0], False, _numbers(3), "where OctoMap's cell (0, 0, 0) lies in frame_id (m)"),
-    "diagnostics_period": Param(
-        1.0,
-        True,
-        lambda v: None if _is_number(v) and v > 0 else "must be seconds > 0",
-        "seconds between /diagnostics messages",
-    ),
+    "diagnostics_period": Param(1.0, True, _positive("seconds"), "seconds between /diagnostics messages"),
 }
 for _name, _default in convert.SPEC_DEFAULTS.items():
     PARAMETERS[_name] = Param(

@@ -899,6 +899,23 @@ mod tests {
         assert!(err.message.contains("1 (CREATE) ..= 6 (LIST)"), "{err}");
     }
 
+    /// Chunk 0 of `chunk_count` of upload `upload_id` of map 1: the unit square, a
+    /// low sun, no expected version.
+    fn upload(upload_id: u64, chunk_count: u32, replace: bool, deltas: Vec<MapDelta>) -> MapRequest {
+        let (bounds, sun) = (Bounds::new([0.0, 0.0, 1.0, 1.0]).unwrap(), Sun::new(0.1, 0.0).unwrap());
+        MapRequest::Upload {
+            map: 1,
+            upload_id,
+            chunk_index: 0,
+            chunk_count,
+            replace,
+            expected_version: None,
+            bounds,
+            sun,
+            deltas,
+        }
+    }
+
     #[test]
     fn a_batch_refuses_voxel_runs_of_nothing_an_upload_takes_them() {
         let empty =
@@ -914,17 +931,7 @@ mod tests {
             assert_eq!(MapRequest::decode(&apply, &records).unwrap_err().status, Status::MalformedDelta);
         }
         // An upload's run of nothing describes a grid with no cells.
-        let up = MapRequest::Upload {
-            map: 1,
-            upload_id: 1,
-            chunk_index: 0,
-            chunk_count: 1,
-            replace: false,
-            expected_version: None,
-            bounds: Bounds::new([0.0, 0.0, 1.0, 1.0]).unwrap(),
-            sun: Sun::new(0.1, 0.0).unwrap(),
-            deltas: vec![no_blocks],
-        };
+        let up = upload(1, 1, false, vec![no_blocks]);
         assert_eq!(MapRequest::decode(&up.header(1, [0, 0]), &up.records()).unwrap(), up);
     }
 
@@ -979,17 +986,7 @@ mod tests {
 
     #[test]
     fn headers_are_checked() {
-        let up = MapRequest::Upload {
-            map: 1,
-            upload_id: 9,
-            chunk_index: 0,
-            chunk_count: 2,
-            replace: true,
-            expected_version: None,
-            bounds: Bounds::new([0.0, 0.0, 1.0, 1.0]).unwrap(),
-            sun: Sun::new(0.1, 0.0).unwrap(),
-            deltas: vec![],
-        };
+        let up = upload(9, 2, true, vec![]);
         let h = up.header(5, [1, 2]);
         assert_eq!(MapRequest::decode(&h, &[]).unwrap(), up);
         let status = |h: MapRequestHeader| MapRequest::decode(&h, &[]).unwrap_err().status;

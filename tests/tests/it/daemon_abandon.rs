@@ -13,8 +13,7 @@
 
 use dyfos_client::prelude::*;
 use dyfos_shared::wire::rendezvous::Mode;
-use dyfos_tests::{KillOnDrop, PATIENCE, RawClient, Sandbox, slow_search_scenario, wait_for};
-use std::process::Stdio;
+use dyfos_tests::{KillOnDrop, PATIENCE, RawClient, Sandbox, slow_search_scenario, wait_for, wait_for_stats};
 use std::time::Duration;
 
 fn brute(budget: Option<u64>) -> RendezvousRequest {
@@ -41,23 +40,14 @@ fn abandoned(admin: &mut Client) -> u64 {
 fn start_doomed_query(sandbox: &Sandbox, admin: &mut Client) -> (KillOnDrop, TempFile) {
     let file = TempFile(sandbox.state_dir.with_extension("slow.json"));
     std::fs::write(&file.0, slow_search_scenario().to_json()).unwrap();
-    let child = sandbox
-        .dyfos("query")
-        .arg(&file.0)
-        .args(["--algo", "brute"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let child = KillOnDrop::new(child);
-    wait_for("the doomed brute query to run", || (admin.stats(PATIENCE).unwrap().running == 1).then_some(()));
+    let child = KillOnDrop::new(sandbox.brute_query(&file.0, &[]));
+    wait_for_stats(admin, "the doomed brute query to run", |s| s.running == 1);
     (child, file)
 }
 
 #[test]
 fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
-    let sandbox = Sandbox::new("abandon-kill");
-    let (daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, daemon, mut admin) = Sandbox::with_slow_daemon("abandon-kill");
     let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
     assert_eq!(abandoned(&mut admin), 0, "a search whose client is there goes on");
     child.kill(); // SIGKILL, and reap
@@ -66,8 +56,8 @@ fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
     // daemon's housekeeping, or at once when a process of the domain creates a
     // node, as this new client does.
     let mut next = sandbox.client();
-    wait_for("the orphaned search to be abandoned", || (abandoned(&mut admin) == 1).then_some(()));
-    wait_for("its worker to be free", || (admin.stats(PATIENCE).unwrap().running == 0).then_some(()));
+    wait_for_stats(&mut admin, "the orphaned search to be abandoned", |s| s.queries_abandoned == 1);
+    wait_for_stats(&mut admin, "its worker to be free", |s| s.running == 0);
 
     // Two workers take one brute query at a time: this one runs on the freed slot.
     let answer = next.rendezvous(&brute(Some(2_000)), PATIENCE).expect("the next client is answered");
@@ -85,15 +75,14 @@ fn a_killed_clients_search_is_abandoned_and_its_worker_serves_the_next() {
 
 #[test]
 fn a_client_that_stops_waiting_abandons_its_query() {
-    let sandbox = Sandbox::new("abandon-timeout");
-    let (_daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, _daemon, mut admin) = Sandbox::with_slow_daemon("abandon-timeout");
     let mut impatient = sandbox.client();
     // The client gives up long before the search could end and drops its pending
     // response; no dead-node cleanup is needed to see that.
     let err = impatient.rendezvous(&brute(None), Duration::from_millis(200)).unwrap_err();
     assert!(matches!(err, RendezvousError::Timeout(_)), "{err}");
-    wait_for("the search to be abandoned", || (abandoned(&mut admin) == 1).then_some(()));
-    wait_for("its worker to be free", || (admin.stats(PATIENCE).unwrap().running == 0).then_some(()));
+    wait_for_stats(&mut admin, "the search to be abandoned", |s| s.queries_abandoned == 1);
+    wait_for_stats(&mut admin, "its worker to be free", |s| s.running == 0);
     // The same client is answered next, on the freed worker.
     let answer = impatient.rendezvous(&brute(Some(500)), PATIENCE).expect("answered after giving up once");
     assert_eq!(answer.evaluations.total, 500);
@@ -106,8 +95,7 @@ fn a_client_that_stops_waiting_abandons_its_query() {
 /// counted, the count stayed at 1 and the wait below ran out.
 #[test]
 fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
-    let sandbox = Sandbox::new("abandon-queued");
-    let (_daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, _daemon, mut admin) = Sandbox::with_slow_daemon("abandon-queued");
     let raw = RawClient::open(&sandbox);
     let dyfos =
         RendezvousRequest { algorithm: Algorithm::Dyfos, deadline: Some(Duration::from_secs(600)), ..brute(None) };
@@ -116,25 +104,18 @@ fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
     let running_brute = send(&brute(None), 1);
     let running_dyfos = send(&dyfos, 2);
     let queued = send(&dyfos, 3);
-    wait_for("both workers to search with one query queued", || {
-        let s = admin.stats(PATIENCE).unwrap();
-        (s.running == 2 && s.queued == 1).then_some(())
-    });
+    wait_for_stats(&mut admin, "both workers to search with one query queued", |s| s.running == 2 && s.queued == 1);
 
     drop(queued);
     drop(running_dyfos);
-    wait_for("the running search to be abandoned and the dropped queued query skipped", || {
-        let s = admin.stats(PATIENCE).unwrap();
-        (s.queries_abandoned == 2 && s.running == 1 && s.queued == 0).then_some(())
+    wait_for_stats(&mut admin, "the running search to be abandoned and the dropped queued query skipped", |s| {
+        s.queries_abandoned == 2 && s.running == 1 && s.queued == 0
     });
     let stats = admin.stats(PATIENCE).unwrap();
     assert_eq!((stats.queries_served, stats.requests_failed), (0, 0), "{stats:?}");
 
     drop(running_brute);
-    wait_for("the last search to be abandoned", || {
-        let s = admin.stats(PATIENCE).unwrap();
-        (s.queries_abandoned == 3 && s.running == 0).then_some(())
-    });
+    wait_for_stats(&mut admin, "the last search to be abandoned", |s| s.queries_abandoned == 3 && s.running == 0);
 }
 
 /// The daemon cleans up after a killed client by itself (its janitor thread, every
@@ -143,11 +124,10 @@ fn a_query_dropped_while_it_waits_for_a_worker_is_skipped_and_counted() {
 /// answered at once, so its waits never run a cleanup either.
 #[test]
 fn the_daemon_cleans_up_after_a_killed_client_by_itself() {
-    let sandbox = Sandbox::new("abandon-janitor");
-    let (daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, daemon, mut admin) = Sandbox::with_slow_daemon("abandon-janitor");
     let (mut child, _file) = start_doomed_query(&sandbox, &mut admin);
     child.kill(); // SIGKILL, and reap
-    wait_for("the orphaned search to be abandoned", || (abandoned(&mut admin) == 1).then_some(()));
+    wait_for_stats(&mut admin, "the orphaned search to be abandoned", |s| s.queries_abandoned == 1);
     // The janitor logs after its cleanup, which is what lets the IPC thread see the
     // client gone: the line may follow the abandonment by a moment.
     wait_for("the janitor to say it cleaned up", || {

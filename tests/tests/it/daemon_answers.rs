@@ -4,7 +4,7 @@ use dyfos_client::prelude::*;
 use dyfos_service::search::SearchControl;
 use dyfos_shared::answer::StopReason;
 use dyfos_shared::world::VerticalCylinder;
-use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, scenario, wait_for, without_micros};
+use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, scenario, wait_for_stats, without_micros};
 use std::io::Write;
 use std::process::{Command, Stdio};
 use std::sync::Arc;
@@ -24,8 +24,7 @@ fn text(answer: &Answer) -> String {
 
 #[test]
 fn daemon_answers_equal_the_offline_library_bit_for_bit() {
-    let sandbox = Sandbox::new("bits");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("bits");
     let mut client = sandbox.client();
     let mut compared = 0;
     for (map, file) in [(1, "example.json"), (2, "golden/scenarios/numerical/map_00.json")] {
@@ -110,8 +109,7 @@ fn a_deadline_returns_the_best_pose_so_far_flagged() {
 
 #[test]
 fn several_client_processes_at_once_and_the_examples() {
-    let sandbox = Sandbox::new("procs");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("procs");
     let file = data("example.json");
     let seeds = [0u64, 1, 2, 3];
     let queries: Vec<KillOnDrop> = seeds
@@ -169,8 +167,7 @@ fn several_client_processes_at_once_and_the_examples() {
 
 #[test]
 fn dyfos_query_prints_what_dyfos_solve_prints() {
-    let sandbox = Sandbox::new("cli");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("cli");
     let file = data("golden/scenarios/numerical/map_01.json");
     let run = |args: &[&str], online: bool| {
         let mut cmd = Command::new(bin("dyfos"));
@@ -208,7 +205,7 @@ fn a_slow_brute_query_does_not_hold_up_a_cheap_one() {
             answer
         })
     };
-    wait_for("the brute query to start", || (client.stats(PATIENCE).unwrap().running >= 1).then_some(()));
+    wait_for_stats(&mut client, "the brute query to start", |s| s.running >= 1);
     let cheap = RendezvousRequest { algorithm: Algorithm::Center, seed: 1, ..RendezvousRequest::new(1, s.belief) };
     let answer = client.rendezvous(&cheap, PATIENCE);
     assert!(!brute_done.load(Ordering::SeqCst), "the cheap query waited for the brute one");
@@ -244,8 +241,7 @@ impl WaitGuarded for std::process::Child {
 /// reply now carries the version the request left the map at.
 #[test]
 fn a_failed_query_reports_the_version_its_inline_deltas_made() {
-    let sandbox = Sandbox::new("inline-version");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("inline-version");
     let mut client = sandbox.client();
     let s = scenario("example.json");
     assert_eq!(client.upload_map(1, &s.world, false, PATIENCE).unwrap(), 0);
@@ -382,8 +378,7 @@ fn an_octomap_map_is_updated_in_batches_and_survives_a_crash() {
 /// `.bt` file does offline, bit for bit.
 #[test]
 fn an_octomap_uploaded_to_the_daemon_answers_as_its_scenario_offline() {
-    let sandbox = Sandbox::new("octomap-upload");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("octomap-upload");
     let scenario = data("octomap/geb079-scenario.json");
     let upload = Command::new(bin("dyfos"))
         .args(["map", "upload", "5", "--octomap"])

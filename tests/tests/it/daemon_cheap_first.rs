@@ -14,7 +14,7 @@
 
 use dyfos_client::prelude::*;
 use dyfos_shared::wire::rendezvous::Mode;
-use dyfos_tests::{PATIENCE, PendingRendezvous, RawClient, Sandbox, slow_search_scenario, wait_for};
+use dyfos_tests::{PATIENCE, PendingRendezvous, RawClient, Sandbox, slow_search_scenario, wait_for_stats};
 use std::time::Duration;
 
 /// A long search of map 1.
@@ -40,8 +40,7 @@ fn answered(pending: &[PendingRendezvous]) -> usize {
 
 #[test]
 fn cheap_requests_are_answered_while_every_worker_searches() {
-    let sandbox = Sandbox::new("cheap-first");
-    let (_daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, _daemon, mut admin) = Sandbox::with_slow_daemon("cheap-first");
 
     // Two raw clients, each connected (one round trip) before anything is timed by
     // order. The first sends a brute search (it may hold all workers but one) and
@@ -57,10 +56,7 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
         send(&greedy, &search(Algorithm::Dyfos, 2), 2),
         send(&greedy, &search(Algorithm::Dyfos, 3), 3),
     ];
-    wait_for("both workers to search with one query queued", || {
-        let s = admin.stats(PATIENCE).unwrap();
-        (s.running == 2 && s.queued == 1).then_some(())
-    });
+    wait_for_stats(&mut admin, "both workers to search with one query queued", |s| s.running == 2 && s.queued == 1);
 
     // Each cheap request is answered while no search is.
     let check = admin.check(&search(Algorithm::Dyfos, 4), PATIENCE).unwrap();
@@ -76,12 +72,11 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
     // the first client (the daemon abandons it); its queued `dyfos` then stays
     // queued behind the second client's.
     let second = send(&other, &search(Algorithm::Dyfos, 5), 5);
-    wait_for("the second client's query to queue", || (admin.stats(PATIENCE).unwrap().queued == 2).then_some(()));
+    wait_for_stats(&mut admin, "the second client's query to queue", |s| s.queued == 2);
     let mut pending = pending;
     drop(pending.remove(1));
-    wait_for("the given-up search to be abandoned and a worker to take the next query", || {
-        let s = admin.stats(PATIENCE).unwrap();
-        (s.queries_abandoned == 1 && s.running == 2 && s.queued == 1).then_some(())
+    wait_for_stats(&mut admin, "the given-up search to be abandoned and a worker to take the next query", |s| {
+        s.queries_abandoned == 1 && s.running == 2 && s.queued == 1
     });
     // So the second client's search is the one running: giving it up abandons a
     // search. (First come, first served, it would still be queued, behind the
@@ -89,16 +84,11 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
     // slow to start it skips it instead, which counts the same.
     assert!(second.receive().unwrap().is_none(), "the second client's search runs (10-minute deadline)");
     drop(second);
-    wait_for("the second client's running search to be abandoned", || {
-        (admin.stats(PATIENCE).unwrap().queries_abandoned == 2).then_some(())
-    });
+    wait_for_stats(&mut admin, "the second client's running search to be abandoned", |s| s.queries_abandoned == 2);
 
     // Give the rest up: the workers go idle.
     drop(pending);
-    wait_for("the searches to be abandoned", || {
-        let s = admin.stats(PATIENCE).unwrap();
-        (s.running == 0 && s.queued == 0).then_some(())
-    });
+    wait_for_stats(&mut admin, "the searches to be abandoned", |s| s.running == 0 && s.queued == 0);
 }
 
 /// A client with no search running does not wait for another client's searches to
@@ -109,8 +99,7 @@ fn cheap_requests_are_answered_while_every_worker_searches() {
 /// holding, the short query waits for a greedy search to end and this test fails.
 #[test]
 fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
-    let sandbox = Sandbox::new("hold");
-    let (_daemon, mut admin) = sandbox.start_slow();
+    let (sandbox, _daemon, mut admin) = Sandbox::with_slow_daemon("hold");
     let example = dyfos_tests::scenario("example.json");
     admin.upload_map(2, &example.world, false, PATIENCE).unwrap();
 
@@ -118,10 +107,7 @@ fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
     let reply = greedy.rendezvous(search(Algorithm::Dyfos, 0).header(Mode::Check, 9, [0, 0]), &[]);
     assert_eq!(reply.status, 0, "{reply:?}");
     let pending: Vec<_> = (1..=3).map(|i| send(&greedy, &search(Algorithm::Dyfos, i), i)).collect();
-    wait_for("both workers to search with one query queued", || {
-        let s = admin.stats(PATIENCE).unwrap();
-        (s.running == 2 && s.queued == 1).then_some(())
-    });
+    wait_for_stats(&mut admin, "both workers to search with one query queued", |s| s.running == 2 && s.queued == 1);
 
     let mut other = sandbox.client();
     let short = RendezvousRequest { seed: 4, params: example.params, ..RendezvousRequest::new(2, example.belief) };
@@ -129,14 +115,10 @@ fn a_second_clients_query_does_not_wait_for_a_greedy_clients_searches() {
     assert_eq!(answer.map_version, admin.snapshot(2, PATIENCE).unwrap().version());
     assert_eq!(answered(&pending), 0, "a greedy search finished first");
     // The held search went on: two of the greedy client's run, one waits.
-    wait_for("the held search to go on", || {
-        let s = admin.stats(PATIENCE).unwrap();
-        (s.running == 2 && s.queued == 1 && s.queries_served == 1).then_some(())
+    wait_for_stats(&mut admin, "the held search to go on", |s| {
+        s.running == 2 && s.queued == 1 && s.queries_served == 1
     });
 
     drop(pending);
-    wait_for("the searches to be abandoned", || {
-        let s = admin.stats(PATIENCE).unwrap();
-        (s.running == 0 && s.queued == 0).then_some(())
-    });
+    wait_for_stats(&mut admin, "the searches to be abandoned", |s| s.running == 0 && s.queued == 0);
 }

@@ -3,9 +3,9 @@
 use dyfos_client::prelude::*;
 use dyfos_shared::answer::StopReason;
 use dyfos_shared::world::VerticalCylinder;
-use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, scenario, signal, wait_for, without_micros};
+use dyfos_tests::{KillOnDrop, PATIENCE, Sandbox, bin, data, scenario, signal, wait_for_stats, without_micros};
 use std::io::Read;
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
 
 #[test]
@@ -53,8 +53,7 @@ fn kill_9_and_restart_keeps_the_maps_and_clients_reconnect() {
 
 #[test]
 fn a_second_daemon_on_the_same_prefix_refuses_to_start() {
-    let sandbox = Sandbox::new("twice");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("twice");
     let out = Command::new(bin("dyfosd"))
         .args(["--prefix", &sandbox.prefix, "--domain", &sandbox.domain, "--state-dir"])
         .arg(sandbox.state_dir.join("second"))
@@ -71,23 +70,15 @@ fn killing_a_client_mid_query_does_not_disturb_the_others() {
     let file = data("golden/scenarios/hard/hard_01.json");
     let s = scenario("golden/scenarios/hard/hard_01.json");
     let (daemon, mut client) = sandbox.start_serving(1, &s.world);
-    let child = sandbox
-        .dyfos("query")
-        .arg(&file)
-        .args(["--algo", "brute", "--map", "1"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut child = KillOnDrop::new(child);
-    wait_for("the doomed brute query to run", || (client.stats(PATIENCE).unwrap().running >= 1).then_some(()));
+    let mut child = KillOnDrop::new(sandbox.brute_query(&file, &["--map", "1"]));
+    wait_for_stats(&mut client, "the doomed brute query to run", |s| s.running >= 1);
     child.kill(); // SIGKILL, and reap
 
     // Others are served while (and after) the orphaned query runs.
     let request = RendezvousRequest { seed: 2, params: s.params, ..RendezvousRequest::new(1, s.belief) };
     let first = client.rendezvous(&request, PATIENCE);
     assert!(first.is_ok() || first.as_ref().unwrap_err().status() == Some(Status::NoFeasiblePose), "{first:?}");
-    wait_for("the orphaned query to end", || (client.stats(PATIENCE).unwrap().running == 0).then_some(()));
+    wait_for_stats(&mut client, "the orphaned query to end", |s| s.running == 0);
     let mut other = sandbox.client();
     let again = other.rendezvous(&request, PATIENCE);
     assert_eq!(format!("{first:?}").replace(char::is_numeric, ""), format!("{again:?}").replace(char::is_numeric, ""));
@@ -105,7 +96,7 @@ fn sigterm_finishes_in_flight_queries_and_leaves_no_shared_memory() {
             RendezvousRequest { algorithm: Algorithm::Brute, params: s.params, ..RendezvousRequest::new(1, s.belief) };
         std::thread::spawn(move || slow.rendezvous(&request, PATIENCE))
     };
-    wait_for("the brute query to run", || (client.stats(PATIENCE).unwrap().running >= 1).then_some(()));
+    wait_for_stats(&mut client, "the brute query to run", |s| s.running >= 1);
     drop(client);
     assert!(daemon.terminate().success(), "{}", daemon.log());
     let answer = in_flight.join().unwrap().expect("the query in flight is answered before the daemon exits");
@@ -133,19 +124,11 @@ fn a_reply_meant_for_a_killed_client_never_reaches_the_next_one() {
     admin.upload_map(1, &scenario("golden/scenarios/hard/hard_01.json").world, false, PATIENCE).unwrap();
     admin.upload_map(2, &scenario("golden/scenarios/numerical/map_00.json").world, false, PATIENCE).unwrap();
     let query = |file: &std::path::Path, map: &str, extra: &[&str]| {
-        sandbox
-            .dyfos("query")
-            .arg(file)
-            .args(["--algo", "brute", "--map", map])
-            .args(extra)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap()
+        sandbox.brute_query(file, &[["--map", map].as_slice(), extra].concat())
     };
     for seed in ["1", "2"] {
         let mut doomed = KillOnDrop::new(query(&doomed_file, "1", &[]));
-        wait_for("the doomed brute query to run", || (admin.stats(PATIENCE).unwrap().running >= 1).then_some(()));
+        wait_for_stats(&mut admin, "the doomed brute query to run", |s| s.running >= 1);
         doomed.kill(); // SIGKILL, and reap
         let mut next = query(&next_file, "2", &["--budget", "20000", "--seed", seed]).wait_with_output().unwrap();
         if !next.status.success() {
@@ -165,7 +148,7 @@ fn a_reply_meant_for_a_killed_client_never_reaches_the_next_one() {
             .unwrap();
         let json = |out: &[u8]| without_micros(serde_json::from_slice(out).expect("an answer"));
         assert_eq!(json(&next.stdout), json(&offline.stdout), "the next client got another client's answer");
-        wait_for("the orphaned query to end", || (admin.stats(PATIENCE).unwrap().running == 0).then_some(()));
+        wait_for_stats(&mut admin, "the orphaned query to end", |s| s.running == 0);
     }
 }
 
@@ -193,8 +176,7 @@ fn grid_of_several_pages(dz: i64) -> World {
 
 #[test]
 fn clients_cost_the_daemon_little_shared_memory_and_snapshots_come_in_pages() {
-    let sandbox = Sandbox::new("shmclients");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("shmclients");
     let mut first = sandbox.client();
     let world = grid_of_several_pages(0);
     let pages = dyfos_shared::wire::map::world_chunks_of(&world, dyfos_shared::limits::SNAPSHOT_PAGE_RECORDS).len();
@@ -217,8 +199,7 @@ fn clients_cost_the_daemon_little_shared_memory_and_snapshots_come_in_pages() {
 
 #[test]
 fn a_map_deleted_and_made_again_is_snapshot_with_its_new_content() {
-    let sandbox = Sandbox::new("remade");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("remade");
     let mut client = sandbox.client();
     let bounds = Bounds::new([0.0, 0.0, 30.0, 30.0]).unwrap();
     let sun = Sun::new(0.5, 0.0).unwrap();
@@ -239,8 +220,7 @@ fn a_map_deleted_and_made_again_is_snapshot_with_its_new_content() {
 #[test]
 fn snapshot_pages_of_a_map_deleted_and_made_again_carry_another_generation() {
     use dyfos_shared::wire::map::MapRequest;
-    let sandbox = Sandbox::new("generation");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("generation");
     let mut client = sandbox.client();
     let raw = dyfos_tests::RawClient::open(&sandbox);
     // Two maps of several snapshot pages each, both at version 0, other content.
@@ -301,22 +281,13 @@ fn a_stopped_and_continued_daemon_keeps_serving_and_sigint_stops_it() {
 /// query failed with `iceoryx2: InterruptSignal`.
 #[test]
 fn a_client_stopped_and_continued_mid_query_still_gets_its_answer() {
-    let sandbox = Sandbox::new("client-stop-cont");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("client-stop-cont");
     let mut admin = sandbox.client();
     let file = sandbox.state_dir.with_extension("slow.json");
     std::fs::write(&file, dyfos_tests::slow_search_scenario().to_json()).unwrap();
     // A search that ends at its deadline, so the client waits that long.
-    let child = sandbox
-        .dyfos("query")
-        .arg(&file)
-        .args(["--algo", "brute", "--deadline-ms", "1500"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut child = KillOnDrop::new(child);
-    wait_for("the query to run", || (admin.stats(PATIENCE).unwrap().running == 1).then_some(()));
+    let mut child = KillOnDrop::new(sandbox.brute_query(&file, &["--deadline-ms", "1500"]));
+    wait_for_stats(&mut admin, "the query to run", |s| s.running == 1);
     stop_and_continue(child.id(), Duration::from_millis(50));
     let (mut stdout, mut stderr) = (String::new(), String::new());
     let process = child.child_mut().expect("not reaped");

@@ -242,8 +242,7 @@ fn upload_chunks_out_of_sequence_are_refused_and_only_a_complete_upload_changes_
 
 #[test]
 fn the_client_refuses_what_it_cannot_send() {
-    let sandbox = Sandbox::new("local");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("local");
     let mut client = sandbox.client();
     let bounds = create_test_map(&mut client, 1);
     let deltas = vec![MapDelta::Clear; MAX_DELTAS_PER_MESSAGE + 1];

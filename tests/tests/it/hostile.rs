@@ -570,8 +570,7 @@ fn chunk_sequences_out_of_order_duplicated_or_never_finished_are_refused() {
 /// one client could grow the daemon by gigabytes with an upload it never finishes.
 #[test]
 fn an_upload_past_a_maps_limits_is_refused_before_it_completes() {
-    let sandbox = Sandbox::new("bigupload");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("bigupload");
     let raw = RawClient::open(&sandbox);
     let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
     let per_chunk = MAX_DELTAS_PER_MESSAGE as u32;
@@ -650,8 +649,7 @@ fn a_brute_flood_never_makes_a_cheap_query_busy() {
 /// maps it holds still serve, and deleting one makes room again.
 #[test]
 fn maps_past_the_limit_are_refused_and_the_others_still_serve() {
-    let sandbox = Sandbox::new("maplimit");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("maplimit");
     let raw = RawClient::open(&sandbox);
     let bounds = Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap();
     let create = |map: MapId| {

@@ -24,9 +24,42 @@ use dyfos_mission::mission::topics::{Topics, TopicsConfig};
 use dyfos_shared::wire::mission::{MEASUREMENT_TOPIC, Measurement, MeasurementMsg, Observation};
 use dyfos_tests::hosts::{Hosts, INTRUDER, ROVER, Stranger, VIEWER};
 use dyfos_tests::mission::{MissionFiles, Robot, small_mission, steps_of};
-use dyfos_tests::{PATIENCE, Sandbox};
+use dyfos_tests::{DaemonProcess, PATIENCE, Sandbox};
 use std::process::ExitStatus;
 use std::time::{Duration, Instant};
+
+/// Two hosts (and the intruder's, if asked) for `test`, and a sandbox named
+/// `sandbox`; `None` where the hosts cannot be made.
+fn hosts_and_sandbox(test: &str, sandbox: &str, intruder: bool) -> Option<(Hosts, Sandbox)> {
+    Some((Hosts::create(test, intruder)?, Sandbox::new(sandbox)))
+}
+
+/// [`hosts_and_sandbox`] with a daemon in the sandbox, on the viewer's host.
+fn hosts_with_daemon(test: &str, sandbox: &str, intruder: bool) -> Option<(Hosts, Sandbox, DaemonProcess)> {
+    let (hosts, sandbox) = hosts_and_sandbox(test, sandbox, intruder)?;
+    let daemon = sandbox.start_daemon(&[]);
+    Some((hosts, sandbox, daemon))
+}
+
+/// The links of mission `name` on the rover's and the viewer's host.
+fn links(hosts: &Hosts, files: &MissionFiles, name: &str) -> [Robot; 2] {
+    [files.link_on(hosts, ROVER, name, &[]), files.link_on(hosts, VIEWER, name, &[])]
+}
+
+/// Stops each link; each must exit cleanly.
+fn stop_links(links: &mut [Robot]) {
+    for link in links {
+        stop_link(link);
+    }
+}
+
+/// Stops a link, which must exit cleanly; returns its log.
+fn stop_link(link: &mut Robot) -> String {
+    let status = link.terminate();
+    let log = link.log();
+    assert!(status.success(), "the link did not stop cleanly:\n{log}");
+    log
+}
 
 /// Records the mission until the rover exits; returns its status and the trace.
 fn record_until_exit(recorder: &mut Recorder, rover: &mut Robot, patience: Duration) -> ExitStatus {
@@ -86,7 +119,7 @@ fn one_host(files: &MissionFiles, name: &str, seed: u64) -> Outcome {
 
 /// The same mission across the two hosts.
 fn two_hosts(hosts: &Hosts, files: &MissionFiles, name: &str, seed: u64) -> Outcome {
-    let mut links = [files.link_on(hosts, ROVER, name, &[]), files.link_on(hosts, VIEWER, name, &[])];
+    let mut links = links(hosts, files, name);
     let mut recorder = files.recorder(name);
     let mut viewer = files.viewer_on(hosts, name, "dyfos", seed, &[]);
     let mut rover = files.rover_on(hosts, name, seed, "0", &[]);
@@ -94,8 +127,7 @@ fn two_hosts(hosts: &Hosts, files: &MissionFiles, name: &str, seed: u64) -> Outc
     assert!(status.success(), "rover failed:\n{}\nlinks:\n{}\n{}", rover.log(), links[0].log(), links[1].log());
     assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
     for link in &mut links {
-        assert!(link.terminate().success(), "the link did not stop cleanly:\n{}", link.log());
-        assert_quiet_start(&link.log());
+        assert_quiet_start(&stop_link(link));
     }
     outcome(&rover, &recorder.finish())
 }
@@ -143,9 +175,7 @@ fn compare(one: &Outcome, two: &Outcome) {
 
 #[test]
 fn across_two_hosts_the_ape_and_the_rover_log_equal_one_host() {
-    let Some(hosts) = Hosts::create("two-hosts-equal", false) else { return };
-    let sandbox = Sandbox::new("hosts-equal");
-    let _daemon = sandbox.start_daemon(&[]);
+    let Some((hosts, sandbox, _daemon)) = hosts_with_daemon("two-hosts-equal", "hosts-equal", false) else { return };
     let files = MissionFiles::new(&sandbox, &small_mission());
     for seed in [1, 2] {
         let one = one_host(&files, &format!("one-{seed}"), seed);
@@ -159,9 +189,7 @@ fn across_two_hosts_the_ape_and_the_rover_log_equal_one_host() {
 /// arrive at once.
 #[test]
 fn long_legs_at_the_fastest_time_scale_lose_no_step() {
-    let Some(hosts) = Hosts::create("two-hosts-burst", false) else { return };
-    let sandbox = Sandbox::new("hosts-burst");
-    let _daemon = sandbox.start_daemon(&[]);
+    let Some((hosts, sandbox, _daemon)) = hosts_with_daemon("two-hosts-burst", "hosts-burst", false) else { return };
     let mission = Mission { waypoints: vec![[6.5, -6.5], [6.5, 6.5], [-6.5, 6.5], [-6.5, -6.5]], ..small_mission() };
     let legs = mission.path_length() / mission.waypoints.len() as f64;
     assert!(legs > 10.0, "legs of {legs} m");
@@ -198,9 +226,7 @@ fn disturbed_mission(
     scale: &str,
     disturb: impl FnOnce(&Hosts, &MissionFiles, &mut Recorder, &mut Robot, &mut [Robot; 3]),
 ) -> Option<(Vec<serde_json::Value>, Vec<serde_json::Value>, MissionTrace)> {
-    let hosts = Hosts::create(test, false)?;
-    let sandbox = Sandbox::new(test);
-    let _daemon = sandbox.start_daemon(&[]);
+    let (hosts, sandbox, _daemon) = hosts_with_daemon(test, test, false)?;
     let mission = there_and_back();
     let files = MissionFiles::new(&sandbox, &mission);
     let name = "m";
@@ -219,8 +245,8 @@ fn disturbed_mission(
     assert!(status.success(), "rover failed:\n{}", rover.log());
     let [rover_link, viewer_link, viewer] = &mut procs;
     assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
-    assert!(rover_link.terminate().success(), "rover link:\n{}", rover_link.log());
-    assert!(viewer_link.terminate().success(), "viewer link:\n{}", viewer_link.log());
+    stop_link(rover_link);
+    stop_link(viewer_link);
     let trace = recorder.finish();
     assert!(trace.finished(), "the goal was never reported");
     let n = mission.waypoints.len();
@@ -231,29 +257,30 @@ fn disturbed_mission(
     Some((events, viewer.events(), trace))
 }
 
+/// [`disturbed_mission`] with the link between the hosts down for `seconds`.
+fn outage(
+    test: &str,
+    scale: &str,
+    seconds: u64,
+) -> Option<(Vec<serde_json::Value>, Vec<serde_json::Value>, MissionTrace)> {
+    disturbed_mission(test, scale, |hosts, _, _, _, _| {
+        hosts.set_link(false);
+        std::thread::sleep(Duration::from_secs(seconds));
+        hosts.set_link(true);
+    })
+}
+
 #[test]
 fn a_3_s_outage_costs_at_most_the_step_it_hits() {
     // Time scale 1: legs of 6 s or more, longer than the outage and the reconnection.
-    let Some((events, _, _)) = disturbed_mission("outage-3s", "1", |hosts, _, _, _, _| {
-        hosts.set_link(false);
-        std::thread::sleep(Duration::from_secs(3));
-        hosts.set_link(true);
-    }) else {
-        return;
-    };
+    let Some((events, _, _)) = outage("outage-3s", "1", 3) else { return };
     let dead = steps_of(&events, "dead_reckoning");
     assert!(dead.len() <= 1, "more than the step the outage hit was lost: {dead:#?}");
 }
 
 #[test]
 fn a_12_s_outage_is_noticed_by_both_sides_and_the_mission_resumes() {
-    let Some((rover_events, viewer_events, _)) = disturbed_mission("outage-12s", "2", |hosts, _, _, _, _| {
-        hosts.set_link(false);
-        std::thread::sleep(Duration::from_secs(12));
-        hosts.set_link(true);
-    }) else {
-        return;
-    };
+    let Some((rover_events, viewer_events, _)) = outage("outage-12s", "2", 12) else { return };
     let kinds = |events: &[serde_json::Value]| -> Vec<String> {
         events.iter().filter_map(|e| e["event"].as_str().map(str::to_string)).collect()
     };
@@ -297,8 +324,7 @@ fn killed_link_and_viewer_host_processes_restart_and_the_mission_resumes() {
 
 #[test]
 fn a_third_host_without_the_credentials_cannot_publish_a_measurement() {
-    let Some(hosts) = Hosts::create("intruder", true) else { return };
-    let sandbox = Sandbox::new("hosts-intruder");
+    let Some((hosts, sandbox)) = hosts_and_sandbox("intruder", "hosts-intruder", true) else { return };
     let files = MissionFiles::new(&sandbox, &small_mission());
     let name = "m";
     let mut rover_link = files.link_on(&hosts, ROVER, name, &[]);
@@ -370,8 +396,7 @@ fn a_third_host_without_the_credentials_cannot_publish_a_measurement() {
         let _ = std::fs::remove_file(&log);
     }
     let _ = std::fs::remove_file(&wrong);
-    assert!(rover_link.terminate().success());
-    let log = rover_link.log();
+    let log = stop_link(&mut rover_link);
     assert!(log.contains("received=0"), "the rover's link handed nothing on:\n{log}");
 }
 
@@ -399,12 +424,10 @@ fn demo_on_two_hosts_prints_the_one_host_table() {
 /// rover ends as soon as the viewer has the finish, with no warning.
 #[test]
 fn a_two_host_mission_ends_as_promptly_as_a_one_host_one() {
-    let Some(hosts) = Hosts::create("prompt-end", false) else { return };
-    let sandbox = Sandbox::new("hosts-prompt");
-    let _daemon = sandbox.start_daemon(&[]);
+    let Some((hosts, sandbox, _daemon)) = hosts_with_daemon("prompt-end", "hosts-prompt", false) else { return };
     let files = MissionFiles::new(&sandbox, &small_mission());
     let name = "m";
-    let mut links = [files.link_on(&hosts, ROVER, name, &[]), files.link_on(&hosts, VIEWER, name, &[])];
+    let mut links = links(&hosts, &files, name);
     let mut viewer = files.viewer_on(&hosts, name, "dyfos", 6, &[]);
     let started = Instant::now();
     let mut rover = files.rover_on(&hosts, name, 6, "0", &[]);
@@ -439,9 +462,7 @@ fn a_two_host_mission_ends_as_promptly_as_a_one_host_one() {
     );
     let rover_log = rover.log();
     assert!(warnings(&rover_log).is_empty(), "the rover warned:\n{rover_log}");
-    for link in &mut links {
-        assert!(link.terminate().success(), "{}", link.log());
-    }
+    stop_links(&mut links);
 }
 
 /// The viewer's host is cut off while the rover drives its last leg, so that the
@@ -449,14 +470,12 @@ fn a_two_host_mission_ends_as_promptly_as_a_one_host_one() {
 /// hear the finish (and both exit 0), because the rover keeps offering it.
 #[test]
 fn the_finish_reaches_a_viewer_that_was_away_at_the_goal() {
-    let Some(hosts) = Hosts::create("away-at-goal", false) else { return };
-    let sandbox = Sandbox::new("hosts-away");
-    let _daemon = sandbox.start_daemon(&[]);
+    let Some((hosts, sandbox, _daemon)) = hosts_with_daemon("away-at-goal", "hosts-away", false) else { return };
     let mission = small_mission();
     let n = mission.waypoints.len() as u64;
     let files = MissionFiles::new(&sandbox, &mission);
     let name = "m";
-    let mut links = [files.link_on(&hosts, ROVER, name, &[]), files.link_on(&hosts, VIEWER, name, &[])];
+    let mut links = links(&hosts, &files, name);
     let mut viewer = files.viewer_on(&hosts, name, "dyfos", 8, &[]);
     // Paced, so that the last leg lasts long enough to cut the link during it.
     let mut rover = files.rover_on(&hosts, name, 8, "2", &["--measurement-timeout", "60"]);
@@ -490,9 +509,7 @@ fn the_finish_reaches_a_viewer_that_was_away_at_the_goal() {
     );
     let viewer_events = viewer.events();
     assert!(viewer_events.iter().any(|e| e["event"] == "finished"), "{viewer_events:#?}");
-    for link in &mut links {
-        assert!(link.terminate().success(), "{}", link.log());
-    }
+    stop_links(&mut links);
 }
 
 /// 300 connections held open without a word by a host without the credentials:
@@ -501,9 +518,7 @@ fn the_finish_reaches_a_viewer_that_was_away_at_the_goal() {
 /// once per 10 s.
 #[test]
 fn silent_connections_do_not_keep_a_restarted_link_out() {
-    let Some(hosts) = Hosts::create("silent-connections", true) else { return };
-    let sandbox = Sandbox::new("hosts-silent");
-    let _daemon = sandbox.start_daemon(&[]);
+    let Some((hosts, sandbox, _daemon)) = hosts_with_daemon("silent-connections", "hosts-silent", true) else { return };
     let mission = there_and_back();
     let files = MissionFiles::new(&sandbox, &mission);
     let name = "m";
@@ -537,8 +552,7 @@ fn silent_connections_do_not_keep_a_restarted_link_out() {
     wait_for_log(&rover_link, "given up (no handshake within 2s)");
     drop(stranger);
     for link in [&mut rover_link, &mut viewer_link] {
-        assert!(link.terminate().success(), "{}", link.log());
-        assert_quiet_start(&link.log());
+        assert_quiet_start(&stop_link(link));
     }
     let log = rover_link.log();
     let reports: Vec<&str> = log.lines().filter(|l| l.contains("incoming connections")).collect();
@@ -561,16 +575,14 @@ fn time_of_day() -> f64 {
 #[test]
 fn a_strangers_garbage_costs_a_bounded_log() {
     const SECONDS: u64 = 30;
-    let Some(hosts) = Hosts::create("garbage", true) else { return };
-    let sandbox = Sandbox::new("hosts-garbage");
+    let Some((hosts, sandbox)) = hosts_and_sandbox("garbage", "hosts-garbage", true) else { return };
     let files = MissionFiles::new(&sandbox, &small_mission());
     let mut rover_link = files.link_on(&hosts, ROVER, "m", &[]);
     wait_for_log(&rover_link, "link started");
     let mut stranger = Stranger::start(&hosts, INTRUDER, 7447, "garbage", &SECONDS.to_string());
     let sent = stranger.line();
     assert!(sent.starts_with("sent "), "{sent}");
-    assert!(rover_link.terminate().success(), "{}", rover_link.log());
-    let log = rover_link.log();
+    let log = stop_link(&mut rover_link);
     let bound = 200 * 1024 * SECONDS as usize / 60;
     eprintln!("{sent}: {} bytes of log in {SECONDS} s (bound {bound})", log.len());
     assert!(log.len() <= bound, "{} bytes of log:\n{}", log.len(), &log[..log.len().min(20_000)]);
@@ -585,8 +597,7 @@ fn a_strangers_garbage_costs_a_bounded_log() {
 /// trying.
 #[test]
 fn a_link_that_cannot_reach_its_peer_says_so() {
-    let Some(hosts) = Hosts::create("unreachable", false) else { return };
-    let sandbox = Sandbox::new("hosts-unreachable");
+    let Some((hosts, sandbox)) = hosts_and_sandbox("unreachable", "hosts-unreachable", false) else { return };
     let files = MissionFiles::new(&sandbox, &small_mission());
     let mut viewer_link = files.link_on(&hosts, VIEWER, "m", &[]);
     wait_for_log(&viewer_link, "cannot reach the other host");
@@ -598,8 +609,7 @@ fn a_link_that_cannot_reach_its_peer_says_so() {
     let mut rover_link = files.link_on(&hosts, ROVER, "m", &[]);
     wait_for_log(&viewer_link, "the other host is connected");
     for link in [&mut viewer_link, &mut rover_link] {
-        assert!(link.terminate().success(), "{}", link.log());
-        assert_quiet_start(&link.log());
+        assert_quiet_start(&stop_link(link));
     }
 }
 
@@ -607,8 +617,7 @@ fn a_link_that_cannot_reach_its_peer_says_so() {
 /// flows between them, and each says once which mission the other serves.
 #[test]
 fn a_peer_of_another_mission_is_named_once_on_both_sides() {
-    let Some(hosts) = Hosts::create("other-mission", false) else { return };
-    let sandbox = Sandbox::new("hosts-other-mission");
+    let Some((hosts, sandbox)) = hosts_and_sandbox("other-mission", "hosts-other-mission", false) else { return };
     let files = MissionFiles::new(&sandbox, &small_mission());
     let mut rover_link = files.link_on(&hosts, ROVER, "field-1", &[]);
     let mut viewer_link = files.link_on(&hosts, VIEWER, "field-2", &[]);
@@ -620,8 +629,7 @@ fn a_peer_of_another_mission_is_named_once_on_both_sides() {
     wait_for_log(&viewer_link, "serves mission `field-1`");
     std::thread::sleep(Duration::from_secs(2));
     for link in [&mut rover_link, &mut viewer_link] {
-        assert!(link.terminate().success(), "{}", link.log());
-        let log = link.log();
+        let log = stop_link(link);
         assert_eq!(log.matches("serves mission").count(), 1, "said more than once:\n{log}");
     }
 }

@@ -32,8 +32,7 @@ fn snapshot(sandbox: &Sandbox, id: &str) -> (String, World) {
 
 #[test]
 fn every_delta_kind_applies_and_a_snapshot_reads_back_as_its_map() {
-    let sandbox = Sandbox::new("map-json");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("map-json");
     ok(map(&sandbox, ["create", "7", "--bounds", "-10", "-10", "10", "10", "--sun", "0.7", "2.1"]));
     let file = data("deltas-every-kind.json");
     let applied = ok(map(
@@ -89,8 +88,7 @@ fn every_delta_kind_applies_and_a_snapshot_reads_back_as_its_map() {
 
 #[test]
 fn a_malformed_delta_file_names_the_field_and_shows_a_valid_example() {
-    let sandbox = Sandbox::new("map-json-bad");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("map-json-bad");
     ok(map(&sandbox, ["create", "7", "--bounds", "-10", "-10", "10", "10", "--sun", "0.7", "2.1"]));
     let file = sandbox.state_dir.with_extension("bad-deltas.json");
     let cases = [

@@ -6,7 +6,7 @@ use dyfos_client::prelude::*;
 use dyfos_shared::wire::map::{MapReplyHeader, MapRequest, MapRequestHeader, WireDelta, encode_deltas, tag};
 use dyfos_shared::wire::rendezvous::Mode;
 use dyfos_shared::world::{VerticalCylinder, VoxelBlock};
-use dyfos_tests::{PATIENCE, RawClient, Sandbox};
+use dyfos_tests::{PATIENCE, RawFixture, Sandbox, create_test_map};
 
 fn pole(id: u32, x: f64) -> MapDelta {
     MapDelta::UpsertObstacle {
@@ -47,11 +47,8 @@ fn chunk(map: MapId, upload_id: u64, index: u32, count: u32, expected_version: O
 /// upload's last chunk made the deleted map again.
 #[test]
 fn deleting_a_map_abandons_its_upload_in_progress() {
-    let sandbox = Sandbox::new("delup");
-    let _daemon = sandbox.start_daemon(&[]);
-    let raw = RawClient::open(&sandbox);
-    let mut client = sandbox.client();
-    client.create_map(1, bounds(), sun(), PATIENCE).unwrap();
+    let RawFixture { sandbox: _sandbox, daemon: _daemon, mut client, raw } = RawFixture::new("delup");
+    create_test_map(&mut client, 1);
     let (reply, _) = raw.map(chunk(1, 7, 0, 2, None), &encode_deltas(&[pole(1, 1.0)]));
     assert_eq!(status(&reply), Status::Ok);
     client.delete_map(1, None, PATIENCE).unwrap();
@@ -68,9 +65,7 @@ fn deleting_a_map_abandons_its_upload_in_progress() {
 /// chunk and the delta within it, not an index into a batch the reply is not about.
 #[test]
 fn an_uploads_bad_content_is_named_by_chunk_at_the_last_chunk() {
-    let sandbox = Sandbox::new("upbad");
-    let _daemon = sandbox.start_daemon(&[]);
-    let raw = RawClient::open(&sandbox);
+    let RawFixture { sandbox: _sandbox, daemon: _daemon, mut client, raw } = RawFixture::new("upbad");
     let bad = MapDelta::UpsertObstacle {
         id: 9,
         obstacle: Obstacle::Cylinder(VerticalCylinder { center: na::Point2::new(0.0, 0.0), radius: -1.0, height: 2.0 }),
@@ -86,16 +81,14 @@ fn an_uploads_bad_content_is_named_by_chunk_at_the_last_chunk() {
     assert_eq!(last.error_index, u64::MAX, "the bad delta is not in the last chunk's records");
     assert!(last.detail.text().contains("chunk 1, delta #1"), "{}", last.detail.text());
     assert!(last.detail.text().contains("radius"), "{}", last.detail.text());
-    assert_eq!(sandbox.client().snapshot(5, PATIENCE).unwrap_err().status(), Some(Status::UnknownMap));
+    assert_eq!(client.snapshot(5, PATIENCE).unwrap_err().status(), Some(Status::UnknownMap));
 }
 
 /// The content of an upload is a set: upserts and voxel runs (cells and blocks)
 /// may come in any order, within and across chunks, and make the same map.
 #[test]
 fn an_uploads_content_may_come_in_any_order() {
-    let sandbox = Sandbox::new("uporder");
-    let _daemon = sandbox.start_daemon(&[]);
-    let raw = RawClient::open(&sandbox);
+    let RawFixture { sandbox: _sandbox, daemon: _daemon, mut client, raw } = RawFixture::new("uporder");
     let origin = na::Point3::new(-1.0, -1.0, 0.0);
     let cells = |c: Vec<[i64; 3]>| MapDelta::SetVoxels { resolution: 0.25, origin, cells: c, occupied: true };
     let blocks = |b: Vec<VoxelBlock>| MapDelta::SetVoxelBlocks { resolution: 0.25, origin, blocks: b, occupied: true };
@@ -110,7 +103,7 @@ fn an_uploads_content_may_come_in_any_order() {
     }
     let all: Vec<MapDelta> = chunks.concat();
     let expected = World::empty(bounds(), sun()).apply(&all).unwrap().at_version(0);
-    let got = sandbox.client().snapshot(2, PATIENCE).unwrap();
+    let got = client.snapshot(2, PATIENCE).unwrap();
     assert_eq!(got, expected);
     assert_eq!(
         got.obstacles()[&1],
@@ -126,11 +119,8 @@ fn an_uploads_content_may_come_in_any_order() {
 /// version that was right at chunk 0 and went stale meanwhile is reported there.
 #[test]
 fn an_uploads_stale_version_is_reported_at_its_last_chunk() {
-    let sandbox = Sandbox::new("upstale");
-    let _daemon = sandbox.start_daemon(&[]);
-    let raw = RawClient::open(&sandbox);
-    let mut client = sandbox.client();
-    client.create_map(3, bounds(), sun(), PATIENCE).unwrap();
+    let RawFixture { sandbox: _sandbox, daemon: _daemon, mut client, raw } = RawFixture::new("upstale");
+    create_test_map(&mut client, 3);
     let (reply, _) = raw.map(chunk(3, 1, 0, 2, Some(0)), &encode_deltas(&[pole(1, 1.0)]));
     assert_eq!((status(&reply), reply.version), (Status::Ok, 0));
     client.apply(3, Some(0), &[pole(7, -4.0)], PATIENCE).unwrap();
@@ -148,11 +138,8 @@ fn an_uploads_stale_version_is_reported_at_its_last_chunk() {
 /// resolution was refused.
 #[test]
 fn a_voxel_run_of_no_cells_is_refused_in_a_batch() {
-    let sandbox = Sandbox::new("emptyrun");
-    let _daemon = sandbox.start_daemon(&[]);
-    let raw = RawClient::open(&sandbox);
-    let mut client = sandbox.client();
-    client.create_map(4, bounds(), sun(), PATIENCE).unwrap();
+    let RawFixture { sandbox: _sandbox, daemon: _daemon, mut client, raw } = RawFixture::new("emptyrun");
+    create_test_map(&mut client, 4);
     let empty_cells =
         MapDelta::SetVoxels { resolution: 0.5, origin: na::Point3::origin(), cells: vec![], occupied: true };
     let empty_blocks =
@@ -180,11 +167,8 @@ fn a_voxel_run_of_no_cells_is_refused_in_a_batch() {
 /// Where two checks fail at once, the one docs/wire.md §9 lists first answers.
 #[test]
 fn map_requests_are_checked_in_the_documented_order() {
-    let sandbox = Sandbox::new("maporder");
-    let _daemon = sandbox.start_daemon(&[]);
-    let raw = RawClient::open(&sandbox);
-    let mut client = sandbox.client();
-    client.create_map(1, bounds(), sun(), PATIENCE).unwrap();
+    let RawFixture { sandbox: _sandbox, daemon: _daemon, mut client, raw } = RawFixture::new("maporder");
+    create_test_map(&mut client, 1);
     let one = encode_deltas(&[pole(1, 1.0)]);
     let bad_tag = vec![WireDelta { tag: 99, ..Default::default() }];
     let clear = encode_deltas(&[MapDelta::Clear]);
@@ -298,10 +282,7 @@ fn map_requests_are_checked_in_the_documented_order() {
 /// counter; a list request with flags or records is refused.
 #[test]
 fn listing_walks_the_maps_in_id_order_and_is_never_an_error() {
-    let sandbox = Sandbox::new("maplist");
-    let _daemon = sandbox.start_daemon(&[]);
-    let raw = RawClient::open(&sandbox);
-    let mut client = sandbox.client();
+    let RawFixture { sandbox: _sandbox, daemon: _daemon, mut client, raw } = RawFixture::new("maplist");
     let list = |from: MapId| {
         let (reply, records) = raw.map(MapRequest::List { from }.header(from ^ 0x5a5a, [0, 0]), &[]);
         assert_eq!((status(&reply), reply.request_id), (Status::Ok, from ^ 0x5a5a), "{}", reply.detail.text());
@@ -377,8 +358,7 @@ fn listing_walks_the_maps_in_id_order_and_is_never_an_error() {
 /// each map as a snapshot shows it.
 #[test]
 fn the_client_lists_every_map_as_its_snapshot_shows_it() {
-    let sandbox = Sandbox::new("maplistc");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("maplistc");
     let mut client = sandbox.client();
     assert_eq!(client.list_maps(PATIENCE).unwrap(), []);
     let ids = [u64::MAX, 0, u64::MAX - 1, 1 << 40];

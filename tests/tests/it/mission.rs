@@ -5,23 +5,17 @@
 
 use dyfos_mission::mission::Mission;
 use dyfos_shared::wire::mission::Observation;
-use dyfos_tests::mission::{MissionFiles, record_until_exit, small_mission, steps_of};
+use dyfos_tests::mission::{MissionFiles, finish, record_until_exit, small_mission, steps_of};
 use dyfos_tests::{PATIENCE, Sandbox, bin};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
 #[test]
 fn rover_reaches_the_goal_and_every_exchange_happens_in_order() {
-    let sandbox = Sandbox::new("mission-order");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("mission-order");
     let mission = small_mission();
     let files = MissionFiles::new(&sandbox, &mission);
-    let recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 7, &[]);
-    let mut rover = files.rover("m", 7, "0", &[]);
-    let (status, trace) = record_until_exit(recorder, &mut rover);
-    assert!(status.success(), "rover failed:\n{}", rover.log());
-    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    let (rover, viewer, trace) = files.run("m", 7, &[], &[]);
     assert!(trace.finished(), "the goal was never reported");
     let n = mission.waypoints.len() as u64;
 
@@ -82,19 +76,13 @@ fn rover_reaches_the_goal_and_every_exchange_happens_in_order() {
 
 #[test]
 fn measurements_beat_dead_reckoning_on_every_seed() {
-    let sandbox = Sandbox::new("mission-ape");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("mission-ape");
     let files = MissionFiles::new(&sandbox, &small_mission());
     let mut with = Vec::new();
     let mut without = Vec::new();
     for seed in 1..=3 {
         let name = format!("dyfos-{seed}");
-        let recorder = files.recorder(&name);
-        let mut viewer = files.viewer(&name, "dyfos", seed, &[]);
-        let mut rover = files.rover(&name, seed, "0", &[]);
-        let (status, trace) = record_until_exit(recorder, &mut rover);
-        assert!(status.success(), "rover failed:\n{}", rover.log());
-        assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+        let (_, _, trace) = files.run(&name, seed, &[], &[]);
         assert!(trace.updates() >= 3, "seed {seed}: only {} updates", trace.updates());
         with.push(trace.ape().unwrap().rmse);
 
@@ -123,16 +111,13 @@ fn measurements_beat_dead_reckoning_on_every_seed() {
 
 #[test]
 fn a_killed_viewer_leaves_the_rover_finishing_on_dead_reckoning() {
-    let sandbox = Sandbox::new("mission-kill");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("mission-kill");
     let mission = small_mission();
     let files = MissionFiles::new(&sandbox, &mission);
-    let mut recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 3, &[]);
     // Paced at 10× so that the mission is still under way when the viewer dies; a
     // long measurement timeout, so that finishing in time needs the rover to notice
     // the dead viewer rather than wait it out.
-    let mut rover = files.rover("m", 3, "10", &["--measurement-timeout", "60"]);
+    let (mut recorder, mut viewer, mut rover) = files.start("m", 3, "10", &[], &["--measurement-timeout", "60"]);
     // Kill the viewer once the rover has used its first measurement.
     let start = Instant::now();
     while recorder.trace().updates() == 0 {
@@ -225,17 +210,11 @@ fn demo_prints_the_ape_table_and_draws_each_run() {
 
 #[test]
 fn a_moving_sun_reaches_the_daemon_as_map_deltas() {
-    let sandbox = Sandbox::new("mission-sun");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("mission-sun");
     let rate = 0.02;
     let mission = Mission { sun_azimuth_rate: rate, ..small_mission() };
     let files = MissionFiles::new(&sandbox, &mission);
-    let recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 5, &[]);
-    let mut rover = files.rover("m", 5, "0", &[]);
-    let (status, trace) = record_until_exit(recorder, &mut rover);
-    assert!(status.success(), "rover failed:\n{}", rover.log());
-    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    let (_, viewer, trace) = files.run("m", 5, &[], &[]);
     assert!(trace.finished());
 
     let events = viewer.events();
@@ -269,12 +248,9 @@ fn the_example_mission_file_runs_in_the_demo_format() {
 
 #[test]
 fn a_killed_rover_lets_the_viewer_leave() {
-    let sandbox = Sandbox::new("mission-rover-kill");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("mission-rover-kill");
     let files = MissionFiles::new(&sandbox, &small_mission());
-    let mut recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 4, &[]);
-    let mut rover = files.rover("m", 4, "10", &[]);
+    let (mut recorder, mut viewer, mut rover) = files.start("m", 4, "10", &[], &[]);
     let start = Instant::now();
     while recorder.trace().updates() == 0 {
         assert!(start.elapsed() < PATIENCE, "no first update:\n{}", rover.log());
@@ -296,12 +272,7 @@ fn a_mission_with_the_learned_noise_model_runs_end_to_end() {
     let mut mission = small_mission();
     mission.params.model = dyfos_shared::params::ModelKind::Learned;
     let files = MissionFiles::new(&sandbox, &mission);
-    let recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 2, &["--model", model.to_str().unwrap()]);
-    let mut rover = files.rover("m", 2, "0", &[]);
-    let (status, trace) = record_until_exit(recorder, &mut rover);
-    assert!(status.success(), "rover failed:\n{}", rover.log());
-    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    let (_, viewer, trace) = files.run("m", 2, &["--model", model.to_str().unwrap()], &[]);
     assert!(trace.finished());
     assert!(trace.updates() >= 3, "only {} updates:\n{}", trace.updates(), viewer.log());
     // Without the weights the viewer refuses to start, naming the problem.
@@ -314,18 +285,13 @@ fn a_mission_with_the_learned_noise_model_runs_end_to_end() {
 /// error the evaluation measured; a file without `/dyfos/ape` is refused.
 #[test]
 fn dyfos_ape_prints_the_table_of_a_missions_mcap_file() {
-    let sandbox = Sandbox::new("mission-ape-cmd");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("mission-ape-cmd");
     let files = MissionFiles::new(&sandbox, &small_mission());
     let dir = sandbox.state_dir.with_extension("ape");
     std::fs::create_dir_all(&dir).unwrap();
     let (rover_mcap, viewer_mcap) = (dir.join("rover-run.mcap"), dir.join("viewer-run.mcap"));
-    let recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 2, &["--mcap", viewer_mcap.to_str().unwrap()]);
-    let mut rover = files.rover("m", 2, "0", &["--mcap", rover_mcap.to_str().unwrap()]);
-    let (status, trace) = record_until_exit(recorder, &mut rover);
-    assert!(status.success(), "rover failed:\n{}", rover.log());
-    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    let (_, _, trace) =
+        files.run("m", 2, &["--mcap", viewer_mcap.to_str().unwrap()], &["--mcap", rover_mcap.to_str().unwrap()]);
     let ape = trace.ape().expect("samples");
 
     let out = Command::new(bin("dyfos")).arg("ape").arg(&rover_mcap).arg(&rover_mcap).output().unwrap();
@@ -356,15 +322,12 @@ fn dyfos_ape_prints_the_table_of_a_missions_mcap_file() {
 fn the_rover_and_viewer_say_at_exit_what_their_log_left_out() {
     use dyfos_mission::mission::topics::{Topics, TopicsConfig};
     use dyfos_shared::wire::mission::{AckMsg, ROVER_ACK_TOPIC, VIEWER_ACK_TOPIC};
-    let sandbox = Sandbox::new("mission-log-exit");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("mission-log-exit");
     let files = MissionFiles::new(&sandbox, &small_mission());
-    let mut recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 3, &[]);
     // At 2× the last leg lasts a few seconds: the flood comes during it, most
     // likely in the log's last window (if a window ends meanwhile, its summary is
     // written anyway, and the counts must still add up).
-    let mut rover = files.rover("m", 3, "2", &[]);
+    let (mut recorder, mut viewer, mut rover) = files.start("m", 3, "2", &[], &[]);
     let n = small_mission().waypoints.len() as u32;
     let start = Instant::now();
     while recorder.trace().step() < n {
@@ -388,9 +351,7 @@ fn the_rover_and_viewer_say_at_exit_what_their_log_left_out() {
         }
         outboxes.push(outbox);
     }
-    let (status, _) = record_until_exit(recorder, &mut rover);
-    assert!(status.success(), "rover failed:\n{}", rover.log());
-    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    finish(recorder, &mut rover, &mut viewer);
     for (who, log) in [("rover", rover.log()), ("viewer", viewer.log())] {
         let (summaries, written): (Vec<&str>, Vec<&str>) = log
             .lines()

@@ -11,7 +11,7 @@ use dyfos_mission::eval::foxglove::CHANNELS;
 use dyfos_mission::eval::{MissionTrace, ros2};
 use dyfos_shared::wire::mission::Observation;
 use dyfos_tests::Sandbox;
-use dyfos_tests::mission::{MissionFiles, record_until_exit, small_mission, steps_of};
+use dyfos_tests::mission::{MissionFiles, small_mission, steps_of};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -192,17 +192,12 @@ fn rover_poses_match(topics: &BTreeMap<String, Vec<Read>>, trace: &MissionTrace)
 
 #[test]
 fn rover_and_viewer_write_missions_that_match_their_event_logs() {
-    let sandbox = Sandbox::new("mission-mcap");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("mission-mcap");
     let mission = small_mission();
     let files = MissionFiles::new(&sandbox, &mission);
     let (rover_file, viewer_file) = files.mcap_files();
-    let recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 7, &["--mcap", viewer_file.to_str().unwrap()]);
-    let mut rover = files.rover("m", 7, "0", &["--mcap", rover_file.to_str().unwrap()]);
-    let (status, trace) = record_until_exit(recorder, &mut rover);
-    assert!(status.success(), "rover failed:\n{}", rover.log());
-    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    let (rover, viewer, trace) =
+        files.run("m", 7, &["--mcap", viewer_file.to_str().unwrap()], &["--mcap", rover_file.to_str().unwrap()]);
     let n = mission.waypoints.len();
 
     // The rover's file: its own poses, its requests, the measurements it used.
@@ -309,19 +304,14 @@ fn read_ros2(path: &Path) -> BTreeMap<String, Vec<u64>> {
 
 #[test]
 fn rover_and_viewer_write_ros2_bags_on_request() {
-    let sandbox = Sandbox::new("mission-ros2");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("mission-ros2");
     let mission = small_mission();
     let files = MissionFiles::new(&sandbox, &mission);
     let (rover_file, viewer_file) = files.mcap_files();
     let ros2 = |file: &Path| ["--mcap".to_string(), file.display().to_string(), "--mcap-profile".into(), "ros2".into()];
     let (rover_args, viewer_args) = (ros2(&rover_file), ros2(&viewer_file));
-    let recorder = files.recorder("m");
-    let mut viewer = files.viewer("m", "dyfos", 7, &viewer_args.each_ref().map(String::as_str));
-    let mut rover = files.rover("m", 7, "0", &rover_args.each_ref().map(String::as_str));
-    let (status, trace) = record_until_exit(recorder, &mut rover);
-    assert!(status.success(), "rover failed:\n{}", rover.log());
-    assert!(viewer.wait_exit().success(), "viewer failed:\n{}", viewer.log());
+    let (rover, viewer, trace) =
+        files.run("m", 7, &viewer_args.each_ref().map(String::as_str), &rover_args.each_ref().map(String::as_str));
     let n = mission.waypoints.len();
 
     let topics = read_ros2(&rover_file);

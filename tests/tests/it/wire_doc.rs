@@ -384,6 +384,19 @@ fn rows(pairs: &[(u64, String)]) -> Vec<String> {
     pairs.iter().map(|(n, name)| format!("| {n} | `{name}` |")).collect()
 }
 
+/// Checks that the code table whose first column is `first` lists `expected`, as
+/// `what`; returns the documented (code, name) rows.
+fn same_codes(all: &[Table], first: &str, what: &str, expected: &[(u64, String)]) -> Vec<(u64, String)> {
+    let (t, documented) = codes(all, first);
+    same_rows(what, t, rows(&documented), rows(expected));
+    documented
+}
+
+/// The (code, name) of every code 0..=256 that `decode` accepts.
+fn decoded_codes(decode: impl Fn(u32) -> Option<String>) -> Vec<(u64, String)> {
+    (0..=256u32).filter_map(|c| decode(c).map(|name| (u64::from(c), name))).collect()
+}
+
 /// A valid rendezvous request header, to vary one field of.
 fn valid_rendezvous_header() -> RendezvousRequestHeader {
     let belief =
@@ -428,9 +441,8 @@ fn tag_name(delta: &MapDelta) -> &'static str {
 #[test]
 fn documented_delta_tags_and_flags_are_the_rust_ones() {
     let all = tables(DOC);
-    let (t, documented) = codes(&all, "tag");
     let expected: Vec<(u64, String)> = tag::ALL.iter().map(|(n, s)| (u64::from(*n), s.to_string())).collect();
-    same_rows("delta tags", t, rows(&documented), rows(&expected));
+    let documented = same_codes(&all, "tag", "delta tags", &expected);
     // The range the text states, and the one an unknown tag's error message gives.
     let (first, last) = (tag::ALL[0].0, tag::ALL[tag::ALL.len() - 1].0);
     assert!(DOC.contains(&format!("Tags are {first} ..= {last}; any other is `malformed_delta`")), "docs/wire.md §4.2");
@@ -528,62 +540,46 @@ fn documented_delta_tags_and_flags_are_the_rust_ones() {
 fn documented_operations_modes_algorithms_models_and_stops_are_the_rust_ones() {
     let all = tables(DOC);
 
-    let (t, documented) = codes(&all, "op");
     let expected: Vec<(u64, String)> = op::ALL.iter().map(|(n, s)| (u64::from(*n), s.to_string())).collect();
-    same_rows("map operations", t, rows(&documented), rows(&expected));
+    let documented = same_codes(&all, "op", "map operations", &expected);
     for o in 0..=256u32 {
         let refused = MapRequest::decode(&MapRequestHeader { op: o, ..MapRequestHeader::default() }, &[])
             .is_err_and(|e| e.message.contains("is not a map operation"));
         assert_eq!(refused, !documented.iter().any(|(n, _)| *n == u64::from(o)), "op {o}");
     }
 
-    let (t, documented) = codes(&all, "mode");
-    let mut decoded = Vec::new();
-    for m in 0..=256u32 {
-        let header = RendezvousRequestHeader { mode: m, ..valid_rendezvous_header() };
-        if let Ok((_, mode)) = RendezvousRequest::decode(&header, &[]) {
-            let name = match mode {
-                Mode::Solve => "solve",
-                Mode::Check => "check",
-            };
-            decoded.push((u64::from(m), name.to_string()));
-        }
-    }
-    same_rows("modes", t, rows(&documented), rows(&decoded));
+    let decoded = decoded_codes(|m| {
+        let (_, mode) =
+            RendezvousRequest::decode(&RendezvousRequestHeader { mode: m, ..valid_rendezvous_header() }, &[]).ok()?;
+        let name = match mode {
+            Mode::Solve => "solve",
+            Mode::Check => "check",
+        };
+        Some(name.to_string())
+    });
+    same_codes(&all, "mode", "modes", &decoded);
 
-    let (t, documented) = codes(&all, "algorithm");
-    let mut decoded = Vec::new();
-    for a in 0..=256u32 {
+    let decoded = decoded_codes(|a| {
         let header = RendezvousRequestHeader { algorithm: a, ..valid_rendezvous_header() };
-        if let Ok((request, _)) = RendezvousRequest::decode(&header, &[]) {
-            decoded.push((u64::from(a), request.algorithm.name().to_string()));
-        }
-    }
+        RendezvousRequest::decode(&header, &[]).ok().map(|(request, _)| request.algorithm.name().to_string())
+    });
     let from_all: Vec<(u64, String)> =
         Algorithm::ALL.iter().enumerate().map(|(i, a)| (i as u64, a.name().to_string())).collect();
     assert_eq!(decoded, from_all);
-    same_rows("algorithms", t, rows(&documented), rows(&decoded));
+    same_codes(&all, "algorithm", "algorithms", &decoded);
 
-    let (t, documented) = codes(&all, "model");
-    let mut decoded = Vec::new();
-    for m in 0..=256u32 {
+    let decoded = decoded_codes(|m| {
         let wire = WireParams { model: m, set: WireParams::bit("model").expect("model bit"), ..WireParams::default() };
-        if let Ok(p) = Params::try_from(&wire) {
-            decoded.push((u64::from(m), p.model.name().to_string()));
-        }
-    }
+        Params::try_from(&wire).ok().map(|p| p.model.name().to_string())
+    });
     assert_eq!(decoded.len(), [ModelKind::Paper, ModelKind::Anisotropic, ModelKind::Learned].len());
-    same_rows("models", t, rows(&documented), rows(&decoded));
+    same_codes(&all, "model", "models", &decoded);
 
-    let (t, documented) = codes(&all, "stop");
-    let mut decoded = Vec::new();
-    for s in 0..=256u32 {
-        let reply = RendezvousReply { stop: s, ..RendezvousReply::checked(1, 0) };
-        if let Ok(answer) = reply.decode_answer() {
-            let name = serde_json::to_value(answer.stop).expect("stop as JSON");
-            decoded.push((u64::from(s), name.as_str().expect("a name").to_string()));
-        }
-    }
+    let decoded = decoded_codes(|s| {
+        let answer = RendezvousReply { stop: s, ..RendezvousReply::checked(1, 0) }.decode_answer().ok()?;
+        let name = serde_json::to_value(answer.stop).expect("stop as JSON");
+        Some(name.as_str().expect("a name").to_string())
+    });
     let _every_stop_is_known = |s: StopReason| match s {
         StopReason::Finished
         | StopReason::MaxGenerations
@@ -591,32 +587,41 @@ fn documented_operations_modes_algorithms_models_and_stops_are_the_rust_ones() {
         | StopReason::Deadline
         | StopReason::Abandoned => (),
     };
-    same_rows("stop reasons", t, rows(&documented), rows(&decoded));
+    same_codes(&all, "stop", "stop reasons", &decoded);
 }
 
-/// The wire value of parameter `name` in `w`: exhaustive over [`WireParams::FIELDS`]
-/// (a new parameter panics here until the test and the document know it).
+/// The wire value of parameter `name` in `w` as numbers (`t_vs` as its three), for
+/// every parameter of the one list in `dyfos_shared::params` (a parameter the
+/// document lacks fails the table check below).
 fn param_values(w: &WireParams, name: &str) -> Vec<f64> {
-    match name {
-        "rover_radius" => vec![w.rover_radius],
-        "marker_size" => vec![w.marker_size],
-        "marker_height" => vec![w.marker_height],
-        "viewer_radius" => vec![w.viewer_radius],
-        "safety_margin" => vec![w.safety_margin],
-        "z_min" => vec![w.z_min],
-        "z_max" => vec![w.z_max],
-        "camera_pitch" => vec![w.camera_pitch],
-        "t_vs" => w.t_vs.to_vec(),
-        "f_h" => vec![w.f_h],
-        "f_v" => vec![w.f_v],
-        "rho_min" => vec![w.rho_min],
-        "rho_max" => vec![w.rho_max],
-        "kappa" => vec![w.kappa],
-        "lambda" => vec![w.lambda],
-        "perimeter_points" => vec![f64::from(w.perimeter_points)],
-        "model" => vec![f64::from(w.model)],
-        other => panic!("parameter `{other}` is new: add it to this test and to docs/wire.md"),
+    /// A wire field's numbers.
+    trait Numbers {
+        fn numbers(&self) -> Vec<f64>;
     }
+    impl Numbers for f64 {
+        fn numbers(&self) -> Vec<f64> {
+            vec![*self]
+        }
+    }
+    impl Numbers for u32 {
+        fn numbers(&self) -> Vec<f64> {
+            vec![f64::from(*self)]
+        }
+    }
+    impl Numbers for [f64; 3] {
+        fn numbers(&self) -> Vec<f64> {
+            self.to_vec()
+        }
+    }
+    macro_rules! values {
+        ($($(#[doc = $doc:literal])* #[wire($slot:literal)] $name:ident: $ty:ty = $default:expr,)*) => {
+            match name {
+                $(stringify!($name) => w.$name.numbers(),)*
+                other => panic!("no parameter `{other}`"),
+            }
+        };
+    }
+    dyfos_shared::spec_params!(values)
 }
 
 #[test]
@@ -723,8 +728,7 @@ fn documented_services_and_limits_are_what_dyfosd_creates() {
     use iceoryx2::service::static_config::messaging_pattern::MessagingPattern;
 
     let all = tables(DOC);
-    let sandbox = Sandbox::new("wire-doc");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("wire-doc");
     let mut config = iceoryx2::config::Config::default();
     config.global.prefix = FileName::new(sandbox.domain.as_bytes()).expect("domain");
     let mut services = BTreeMap::new();
@@ -856,8 +860,7 @@ fn documented_client_port_settings_loan_every_size_a_request_may_have() {
     };
     assert_eq!(t.rows.len(), 2, "docs/wire.md line {}: one row per service with slices", t.line);
 
-    let sandbox = Sandbox::new("wire-doc-loan");
-    let _daemon = sandbox.start_daemon(&[]);
+    let (sandbox, _daemon) = Sandbox::with_daemon("wire-doc-loan");
     let (node, names) = sandbox.ipc_node();
     let services = services::Services::new(&node, &names);
     let rendezvous = services.rendezvous().expect("service name").open().expect("open rendezvous");

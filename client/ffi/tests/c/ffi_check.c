@@ -43,37 +43,29 @@ static void expect_status(const char *what, int line, dyfos_status got, dyfos_st
     }                                                                     \
   } while (0)
 
-static char *read_file(const char *path) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return NULL;
-  fseek(f, 0, SEEK_END);
-  long n = ftell(f);
-  fseek(f, 0, SEEK_SET);
-  char *text = malloc((size_t)n + 1);
-  if (text && fread(text, 1, (size_t)n, f) != (size_t)n) {
-    free(text);
-    text = NULL;
-  }
-  if (text) text[n] = '\0';
-  fclose(f);
-  return text;
-}
-
-/* A whole file's bytes and length (NULL if unreadable). */
+/* A whole file's bytes and length (NULL if unreadable), followed by a NUL that
+ * `len` does not count, so that a text file's bytes are a C string. */
 static unsigned char *read_bytes(const char *path, size_t *len) {
   FILE *f = fopen(path, "rb");
   if (!f) return NULL;
   fseek(f, 0, SEEK_END);
   long n = ftell(f);
   fseek(f, 0, SEEK_SET);
-  unsigned char *bytes = malloc(n > 0 ? (size_t)n : 1);
+  unsigned char *bytes = n < 0 ? NULL : malloc((size_t)n + 1);
   if (bytes && fread(bytes, 1, (size_t)n, f) != (size_t)n) {
     free(bytes);
     bytes = NULL;
   }
+  if (bytes) bytes[n] = '\0';
   fclose(f);
   *len = (size_t)n;
   return bytes;
+}
+
+/* A whole text file as a C string (NULL if unreadable). */
+static char *read_file(const char *path) {
+  size_t len;
+  return (char *)read_bytes(path, &len);
 }
 
 /* Two answers equal in every field but the compute time. */

@@ -79,18 +79,6 @@ pub fn schema(name: &str) -> Option<&'static str> {
 pub(crate) struct Json;
 
 impl Encoding for Json {
-    fn profile(&self) -> &'static str {
-        ""
-    }
-
-    fn message_encoding(&self) -> &'static str {
-        "json"
-    }
-
-    fn schema_encoding(&self) -> &'static str {
-        "jsonschema"
-    }
-
     fn schema(&self, topic: Topic) -> Result<(&'static str, Vec<u8>), String> {
         let name = CHANNELS[topic as usize].1;
         let schema = schema(name).ok_or_else(|| format!("no schema {name}"))?;

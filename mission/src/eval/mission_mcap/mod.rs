@@ -81,6 +81,15 @@ impl McapProfile {
             McapProfile::Ros2 => "ros2",
         }
     }
+
+    /// The MCAP header's profile (`""` for none), the channels' message encoding
+    /// and the schemas' encoding.
+    fn encodings(self) -> (&'static str, &'static str, &'static str) {
+        match self {
+            McapProfile::Foxglove => ("", "json", "jsonschema"),
+            McapProfile::Ros2 => ("ros2", "cdr", "ros2msg"),
+        }
+    }
 }
 
 /// The topics of a mission file, in the order ties in log time are written.
@@ -286,12 +295,6 @@ pub enum McapWriteError {
 
 /// A profile's encoding of messages (see [`super::foxglove`], [`super::ros2`]).
 pub(crate) trait Encoding {
-    /// The MCAP header's profile (`""` for none).
-    fn profile(&self) -> &'static str;
-    /// The channels' message encoding.
-    fn message_encoding(&self) -> &'static str;
-    /// The schemas' encoding.
-    fn schema_encoding(&self) -> &'static str;
     /// The schema name and data of a topic's channel.
     fn schema(&self, topic: Topic) -> Result<(&'static str, Vec<u8>), String>;
     /// The bytes of one message of `topic` at `ns`.
@@ -409,15 +412,16 @@ impl McapMission {
     /// The MCAP file's bytes in `profile`.
     pub fn to_bytes(&self, profile: McapProfile) -> Result<Vec<u8>, McapWriteError> {
         match profile {
-            McapProfile::Foxglove => self.encode(&mut foxglove::Json),
-            McapProfile::Ros2 => self.encode(&mut ros2::Cdr::default()),
+            McapProfile::Foxglove => self.encode(profile, &mut foxglove::Json),
+            McapProfile::Ros2 => self.encode(profile, &mut ros2::Cdr::default()),
         }
     }
 
-    fn encode(&self, encoding: &mut impl Encoding) -> Result<Vec<u8>, McapWriteError> {
+    fn encode(&self, profile: McapProfile, encoding: &mut impl Encoding) -> Result<Vec<u8>, McapWriteError> {
+        let (header_profile, message_encoding, schema_encoding) = profile.encodings();
         let mut writer = mcap::WriteOptions::new()
             .compression(None)
-            .profile(encoding.profile())
+            .profile(header_profile)
             .create(std::io::Cursor::new(Vec::new()))?;
         let mut schema_ids = BTreeMap::new();
         let mut channels: BTreeMap<Topic, (u16, u32)> = BTreeMap::new();
@@ -435,13 +439,12 @@ impl McapMission {
                     let schema_id = match schema_ids.get(name) {
                         Some(id) => *id,
                         None => {
-                            let id = writer.add_schema(name, encoding.schema_encoding(), &schema)?;
+                            let id = writer.add_schema(name, schema_encoding, &schema)?;
                             schema_ids.insert(name, id);
                             id
                         }
                     };
-                    let id =
-                        writer.add_channel(schema_id, topic.name(), encoding.message_encoding(), &BTreeMap::new())?;
+                    let id = writer.add_channel(schema_id, topic.name(), message_encoding, &BTreeMap::new())?;
                     c.insert((id, 0))
                 }
             };

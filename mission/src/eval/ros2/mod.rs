@@ -123,18 +123,6 @@ impl Cdr {
 }
 
 impl Encoding for Cdr {
-    fn profile(&self) -> &'static str {
-        "ros2"
-    }
-
-    fn message_encoding(&self) -> &'static str {
-        "cdr"
-    }
-
-    fn schema_encoding(&self) -> &'static str {
-        "ros2msg"
-    }
-
     fn schema(&self, topic: Topic) -> Result<(&'static str, Vec<u8>), String> {
         let name = CHANNELS[topic as usize].1;
         Ok((name, definitions::full_text(name)?.into_bytes()))

@@ -249,6 +249,16 @@ mod tests {
         q.push(client, false, (client, n));
     }
 
+    /// Two workers (and `spares` spares), both searching for client 1.
+    fn client_1_on_both_workers(spares: usize) -> Q {
+        let mut q = Q::new(2, spares);
+        push(&mut q, 1, 0);
+        push(&mut q, 1, 1);
+        q.take(0).unwrap();
+        q.take(1).unwrap();
+        q
+    }
+
     #[test]
     fn the_fair_pick_serves_the_client_with_fewest_searches_running() {
         // Client 1 has two searches running and three queued; client 2 queued last.
@@ -299,11 +309,7 @@ mod tests {
 
     #[test]
     fn a_starved_client_gets_the_core_of_a_held_search() {
-        let mut q = Q::new(2, 2);
-        push(&mut q, 1, 0);
-        push(&mut q, 1, 1);
-        q.take(0).unwrap();
-        q.take(1).unwrap();
+        let mut q = client_1_on_both_workers(2);
         assert_eq!(q.hold_for_starved(), None, "nobody starves");
         // Client 2 queues while client 1 holds both workers.
         push(&mut q, 2, 0);
@@ -331,11 +337,7 @@ mod tests {
 
     #[test]
     fn no_search_is_held_without_a_spare_to_stand_in() {
-        let mut q = Q::new(2, 0);
-        push(&mut q, 1, 0);
-        push(&mut q, 1, 1);
-        q.take(0).unwrap();
-        q.take(1).unwrap();
+        let mut q = client_1_on_both_workers(0);
         push(&mut q, 2, 0);
         assert_eq!(q.hold_for_starved(), None);
     }
