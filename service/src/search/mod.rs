@@ -23,10 +23,12 @@
 mod brute;
 mod de;
 mod sampling;
+mod stall;
 
 pub use brute::Brute;
 pub use de::{DifferentialEvolution, Polish};
 pub use sampling::{CenterView, RandomSampling};
+pub use stall::Stall;
 
 use crate::lupp::{Evaluation, Lupp};
 use dyfos_shared::answer::{Algorithm, EvalStats, StopReason};

@@ -7,7 +7,7 @@ use dyfos_bench::numerical::{NumericalConfig, numerical_maps};
 use dyfos_bench::scaling::{MapKind, obstacle_scaling, scaling_table};
 use dyfos_bench::stats::Summary;
 use dyfos_bench::svg::{Series, ViolinPlot, line_plot};
-use dyfos_service::search::{AnySearch, DifferentialEvolution, Polish};
+use dyfos_service::search::{AnySearch, DifferentialEvolution, Polish, Stall};
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::params::ModelKind;
 use std::fmt::Write;
@@ -30,9 +30,13 @@ pub struct NumericalArgs {
     algos: Vec<Algorithm>,
     /// Also compare a differential evolution setting, as `NAME:key=value,...` starting
     /// from the `dyfos` default; keys: popsize, tol, atol, generations, recombination,
-    /// polish (adaptive polish with at most this many evaluations), mirrored (the
-    /// adaptive polish from the best member and from its mirror image). Repeatable.
-    /// Example: `--de before:polish=300`.
+    /// stall and epsilon (stop after this many generations without a drop of the best
+    /// energy over epsilon), nostall (SciPy's stop alone), polish (adaptive polish with
+    /// at most this many evaluations), mirrored (the adaptive polish from the best
+    /// member and from its mirror image, this many each), turns, heats and raced (the
+    /// raced polish: heats of this many evaluations from this many turns of the viewer
+    /// yaw, then at most `raced` from the lowest), floor (the polish's smallest step).
+    /// Repeatable. Example: `--de before:popsize=15,nostall=1,mirrored=150,floor=1e-9`.
     #[arg(long = "de", value_name = "NAME:SETTINGS")]
     de: Vec<String>,
     /// Threads for `brute` (default: all cores); the other algorithms use one.
@@ -74,6 +78,9 @@ fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
     })
 }
 
+/// What `stall=` or `epsilon=` alone leaves of the other: never stop on a stall.
+const NO_STALL: Stall = Stall { epsilon: 0.0, generations: u32::MAX };
+
 /// `NAME:key=value,...` over the `dyfos` default.
 fn parse_de(spec: &str) -> anyhow::Result<Contender> {
     let (name, settings) = spec.split_once(':').unwrap_or((spec, ""));
@@ -99,8 +106,24 @@ fn parse_de(spec: &str) -> anyhow::Result<Contender> {
             "polish" => de.polish = Polish::Adaptive { evaluations: count()? },
             "mirrored" => de.polish = Polish::Mirrored { evaluations: count()? },
             "recombination" => de.recombination = number,
+            "stall" => de.stall = Some(Stall { generations: u32::try_from(count()?)?, ..de.stall.unwrap_or(NO_STALL) }),
+            "epsilon" => de.stall = Some(Stall { epsilon: number, ..de.stall.unwrap_or(NO_STALL) }),
+            "nostall" => de.stall = None,
+            "floor" => de.polish_floor = number,
+            "turns" | "heats" | "raced" => {
+                let (mut turns, mut heats, mut evaluations) = match de.polish {
+                    Polish::Raced { turns, heats, evaluations } => (u64::from(turns), heats, evaluations),
+                    _ => (2, 50, 150),
+                };
+                *(match key {
+                    "turns" => &mut turns,
+                    "heats" => &mut heats,
+                    _ => &mut evaluations,
+                }) = count()?;
+                de.polish = Polish::Raced { turns: u32::try_from(turns)?, heats, evaluations };
+            }
             _ => bail!(
-                "--de `{spec}`: unknown key `{key}` (popsize, tol, atol, generations, polish, mirrored, recombination)"
+                "--de `{spec}`: unknown key `{key}` (popsize, tol, atol, generations, polish, mirrored, recombination, stall, epsilon, nostall, floor, turns, heats, raced)"
             ),
         }
     }
