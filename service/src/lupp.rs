@@ -27,7 +27,7 @@ use dyfos_shared::params::Params;
 use dyfos_shared::posterior::{Belief, Prior};
 use dyfos_shared::sdsmm::{Features, NoiseModel, Sdsmm};
 use dyfos_shared::sensor::{SearchSpace, SensorPose, SensorRig, SensorState};
-use dyfos_shared::world::{Blocker, Segment, World};
+use dyfos_shared::world::{Blocker, Segment, SightFan, World};
 use std::f64::consts::FRAC_1_SQRT_2;
 
 /// The constraint that rejected a candidate (SPEC §5).
@@ -142,6 +142,8 @@ pub struct Lupp<'a> {
     reach: f64,
     /// The box spanned by `targets`.
     target_box: (Point3<f64>, Point3<f64>),
+    /// The obstacles that can block a sight line, by the sensor's azimuth from the marker.
+    fan: SightFan,
 }
 
 /// Segment checks of one candidate a caller has already proved to pass (by a
@@ -170,6 +172,9 @@ impl<'a> Lupp<'a> {
             Point3::new(marker.x + params.rover_radius * a.cos(), marker.y + params.rover_radius * a.sin(), marker.z)
         }));
         let target_box = targets.iter().fold((marker, marker), |(lo, hi), q| (lo.inf(q), hi.sup(q)));
+        // Sensors lie within ρ_max of the marker; the fan serves them all (a sensor
+        // beyond, by rounding, is answered by the BVH, the same verdict).
+        let fan = world.sight_fan(&marker, params.rover_radius, params.rho_max * (1.0 + 1e-9));
         Lupp {
             world,
             model,
@@ -183,6 +188,7 @@ impl<'a> Lupp<'a> {
             heading: theta,
             reach: params.viewer_radius + params.safety_margin,
             target_box,
+            fan,
         }
     }
 
@@ -270,6 +276,7 @@ impl<'a> Lupp<'a> {
             return None;
         }
         let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
+        let (lo, hi) = self.sight_box(pose);
         for chunk in self.targets.chunks(SIGHT_BATCH) {
             let mut n = 0;
             for q in chunk {
@@ -278,7 +285,7 @@ impl<'a> Lupp<'a> {
                     n += 1;
                 }
             }
-            if self.world.any_contact(&batch[..n]) {
+            if self.world.any_sight_contact(&self.fan, &pose.position, &batch[..n], &lo, &hi) {
                 return Some(Violation::Occlusion);
             }
         }

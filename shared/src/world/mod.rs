@@ -20,6 +20,7 @@
 //! ```
 
 mod delta;
+mod fan;
 mod obstacle;
 pub mod octomap;
 mod region;
@@ -28,6 +29,7 @@ mod voxels;
 
 pub(crate) use delta::StoredDelta;
 pub use delta::{MapDelta, MapDeltaError, MapDeltaErrorKind};
+pub use fan::SightFan;
 pub use obstacle::{AxisBox, Obstacle, ObstacleError, VerticalCylinder};
 pub use segment::{Segment, SegmentEnd};
 pub use voxels::{CellIndex, VoxelBlock, VoxelError, VoxelGrid};
