@@ -27,7 +27,7 @@ use dyfos_shared::params::Params;
 use dyfos_shared::posterior::{Belief, Prior};
 use dyfos_shared::sdsmm::{Features, NoiseModel, Sdsmm};
 use dyfos_shared::sensor::{SearchSpace, SensorPose, SensorRig, SensorState};
-use dyfos_shared::world::{Blocker, Segment, SightFan, World};
+use dyfos_shared::world::{Blocker, Nearby, Segment, SightFan, World};
 use std::f64::consts::FRAC_1_SQRT_2;
 
 /// The constraint that rejected a candidate (SPEC §5).
@@ -144,6 +144,8 @@ pub struct Lupp<'a> {
     target_box: (Point3<f64>, Point3<f64>),
     /// The obstacles that can block a sight line, by the sensor's azimuth from the marker.
     fan: SightFan,
+    /// The obstacles near every collision star of the query.
+    nearby: Nearby,
 }
 
 /// Segment checks of one candidate a caller has already proved to pass (by a
@@ -175,6 +177,11 @@ impl<'a> Lupp<'a> {
         // Sensors lie within ρ_max of the marker; the fan serves them all (a sensor
         // beyond, by rounding, is answered by the BVH, the same verdict).
         let fan = world.sight_fan(&marker, params.rover_radius, params.rho_max * (1.0 + 1e-9));
+        // Viewers lie within ρ_max + |t_vs| of the marker, their stars `reach` around
+        // them (a star outside the region, by rounding, is answered by the BVH).
+        let reach = params.viewer_radius + params.safety_margin;
+        let around = Vector3::repeat((params.rho_max + params.t_vs.norm() + reach) * (1.0 + 1e-9));
+        let nearby = world.nearby(&(marker - around), &(marker + around));
         Lupp {
             world,
             model,
@@ -186,9 +193,10 @@ impl<'a> Lupp<'a> {
             half_fov_tangents: Features::half_fov_tangents(params),
             targets,
             heading: theta,
-            reach: params.viewer_radius + params.safety_margin,
+            reach,
             target_box,
             fan,
+            nearby,
         }
     }
 
@@ -269,8 +277,11 @@ impl<'a> Lupp<'a> {
         if !self.in_workspace(&pose.viewer_position) {
             return Some(Violation::Workspace);
         }
-        if !cleared.collision && self.world.any_contact(&self.collision_rays(pose)) {
-            return Some(Violation::Collision);
+        if !cleared.collision {
+            let (lo, hi) = self.collision_box(pose);
+            if self.world.any_contact_near(&self.nearby, &self.collision_rays(pose), &lo, &hi) {
+                return Some(Violation::Collision);
+            }
         }
         if cleared.occlusion {
             return None;

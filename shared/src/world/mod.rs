@@ -21,6 +21,7 @@
 
 mod delta;
 mod fan;
+mod nearby;
 mod obstacle;
 pub mod octomap;
 mod region;
@@ -30,6 +31,7 @@ mod voxels;
 pub(crate) use delta::StoredDelta;
 pub use delta::{MapDelta, MapDeltaError, MapDeltaErrorKind};
 pub use fan::SightFan;
+pub use nearby::Nearby;
 pub use obstacle::{AxisBox, Obstacle, ObstacleError, VerticalCylinder};
 pub use segment::{Segment, SegmentEnd};
 pub use voxels::{CellIndex, VoxelBlock, VoxelError, VoxelGrid};
@@ -324,6 +326,15 @@ impl World {
         let Some((lo, hi)) = span(segments) else {
             return false;
         };
+        self.any_contact_within(segments, &lo, &hi)
+    }
+
+    /// [`World::any_contact`] for segments the caller knows lie in the closed box
+    /// `[lo, hi]` (a box in closed form, e.g. a collision star's cube; a segment's
+    /// end may round outside it by far less than the leaves' padding): the same
+    /// verdict, without computing the segments' span.
+    pub fn any_contact_within(&self, segments: &[Segment], lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+        let (lo, hi) = (*lo, *hi);
         // Gather the leaves near the whole batch once (the batch is compact: a
         // viewer's collision star, or the sight lines to one rover).
         let mut near = [0u32; GATHER_CAPACITY];
