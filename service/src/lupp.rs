@@ -279,11 +279,11 @@ impl<'a> Lupp<'a> {
         }
         if !cleared.collision {
             let (lo, hi) = self.collision_box(pose);
-            if self.world.any_contact_near(&self.nearby, &self.collision_rays(pose), &lo, &hi) {
+            if self.world.any_contact_near(&self.nearby, &lo, &hi, || self.collision_rays(pose)) {
                 return Some(Violation::Collision);
             }
         }
-        if cleared.occlusion {
+        if cleared.occlusion || !self.fan.may_block(&pose.position) {
             return None;
         }
         let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];

@@ -100,6 +100,32 @@ fn bucket(dx: f64, dy: f64) -> usize {
     ((diamond(dx, dy) * (BUCKETS as f64 / 4.0)) as usize).min(BUCKETS - 1)
 }
 
+impl SightFan {
+    /// Whether any obstacle may block a sight line from `sensor`: `false` only when
+    /// [`World::any_sight_contact`] is sure to be `false` (nothing listed up to the
+    /// sensor's distance), so the caller need not even make the segments.
+    #[inline]
+    pub fn may_block(&self, sensor: &Point3<f64>) -> bool {
+        let (dx, dy) = (sensor.x - self.x, sensor.y - self.y);
+        let l = (dx * dx + dy * dy).sqrt();
+        if !(l <= self.range) || self.starts.is_empty() {
+            return true;
+        }
+        self.list(dx, dy, l).first().is_some_and(|e| !(e.from > l))
+    }
+
+    /// The entries for a sensor at (dx, dy) from the marker, `l` = |(dx, dy)| ≤ range.
+    #[inline]
+    fn list(&self, dx: f64, dy: f64, l: f64) -> &[Entry] {
+        if l <= CLOSE {
+            &self.close
+        } else {
+            let b = bucket(dx, dy);
+            &self.entries[self.starts[b] as usize..self.starts[b + 1] as usize]
+        }
+    }
+}
+
 impl World {
     /// The sight fan of a query whose sight lines all end at targets within `radius`
     /// (xy) of `marker`, for sensors up to `range` (xy) from it (see [`SightFan`]).
@@ -187,13 +213,7 @@ impl World {
         if !(l <= fan.range) || fan.starts.is_empty() {
             return self.any_contact(segments);
         }
-        let list = if l <= CLOSE {
-            &fan.close[..]
-        } else {
-            let b = bucket(dx, dy);
-            &fan.entries[fan.starts[b] as usize..fan.starts[b + 1] as usize]
-        };
-        for e in list {
+        for e in fan.list(dx, dy, l) {
             if e.from > l {
                 break;
             }
@@ -323,6 +343,7 @@ mod tests {
                 let want = world.any_contact_by_scan(&segments);
                 assert_eq!(world.any_contact(&segments), want);
                 let got = world.any_sight_contact(&fan, &sensor, &segments, &lo, &hi);
+                assert!(fan.may_block(&sensor) || !got);
                 if got != want {
                     wrong += 1;
                     assert!(pad != FanPad::SAFE, "case {case}, sensor {sensor:?}, theta {theta}: {got} != {want}");

@@ -62,24 +62,33 @@ impl World {
         near
     }
 
-    /// [`World::any_contact`]'s verdict on `segments`, all inside the closed box
-    /// `[lo, hi]`, testing exactly only the listed leaves whose boxes meet it. Falls
+    /// [`World::any_contact`]'s verdict on the batch `segments` makes, all inside
+    /// the closed box `[lo, hi]`, testing exactly only the listed leaves whose boxes
+    /// meet it; the batch is made only if one does (most stars meet nothing). Falls
     /// back to the BVH when the box is not inside the list's region.
-    pub fn any_contact_near(&self, near: &Nearby, segments: &[Segment], lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+    pub fn any_contact_near<S: AsRef<[Segment]>>(
+        &self,
+        near: &Nearby,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+        segments: impl FnOnce() -> S,
+    ) -> bool {
         let inside = (0..3).all(|a| near.lo[a] <= lo[a] && hi[a] <= near.hi[a]);
         if !inside || near.crowded {
-            return self.any_contact_within(segments, lo, hi);
+            return self.any_contact_within(segments().as_ref(), lo, hi);
         }
+        let mut made: Option<S> = None;
+        let mut segments = Some(segments);
         for (b, leaf) in near.boxes.iter().zip(&near.leaves) {
             if b[3] < lo.x || b[0] > hi.x || b[4] < lo.y || b[1] > hi.y || b[5] < lo.z || b[2] > hi.z {
                 continue;
             }
+            let batch = made.get_or_insert_with(|| (segments.take().expect("made once"))());
+            let batch = batch.as_ref();
             let hit = match &self.leaves[*leaf as usize] {
-                Leaf::Solid { shape, .. } => {
-                    segments.iter().any(|s| shape.first_contact(s).is_some_and(|t| s.reaches(t)))
-                }
+                Leaf::Solid { shape, .. } => batch.iter().any(|s| shape.first_contact(s).is_some_and(|t| s.reaches(t))),
                 Leaf::Voxels => self.voxels.as_ref().is_some_and(|v| {
-                    v.may_touch_box(lo, hi) && segments.iter().any(|s| v.first_contact(s).is_some_and(|t| s.reaches(t)))
+                    v.may_touch_box(lo, hi) && batch.iter().any(|s| v.first_contact(s).is_some_and(|t| s.reaches(t)))
                 }),
             };
             if hit {
@@ -178,7 +187,7 @@ mod tests {
                 };
                 let (rays, lo, hi) = star(p, yaw, reach);
                 let want = world.any_contact_by_scan(&rays);
-                let got = world.any_contact_near(&near, &rays, &lo, &hi);
+                let got = world.any_contact_near(&near, &lo, &hi, || rays);
                 if got != want {
                     wrong += 1;
                     assert!(shrink > 0.0, "{rays:?}: {got} != {want}");
@@ -217,8 +226,8 @@ mod tests {
             let p = Point3::new(rng.next() * 16.0 - 8.0, rng.next() * 16.0 - 8.0, rng.next() * 4.0);
             let (rays, lo, hi) = star(p, f64::from(k) * 0.1, 0.6);
             let want = world.any_contact_by_scan(&rays);
-            assert_eq!(world.any_contact_near(&near, &rays, &lo, &hi), want);
-            assert_eq!(world.any_contact_near(&crowded, &rays, &lo, &hi), want);
+            assert_eq!(world.any_contact_near(&near, &lo, &hi, || rays), want);
+            assert_eq!(world.any_contact_near(&crowded, &lo, &hi, || rays), want);
         }
     }
 }
