@@ -5,7 +5,9 @@
 //! ([`World::apply`]), or fails whole and leaves the old one as it was: that is what
 //! makes map updates atomic for the daemon. Queries go through a bounding-volume
 //! hierarchy (parry's `Bvh`) whose leaves are the obstacles, plus one leaf for the
-//! voxel grid, each tested exactly.
+//! voxel grid, each tested exactly. A search's per-candidate queries go through two
+//! per-query indexes over the same leaves instead, with the same verdicts: the
+//! leaves near every collision star ([`Nearby`]) and the sight fan ([`SightFan`]).
 //!
 //! ```
 //! use dyfos_shared::world::{Bounds, MapDelta, Obstacle, Segment, Sun, VerticalCylinder, World};
