@@ -21,11 +21,11 @@
 //! L. The verdict is [`World::any_contact`]'s, bit for bit: the exact tests are the
 //! same and an obstacle is left out only when it cannot touch any segment.
 //!
-//! Floating point: every radius is padded ([`FanPad`]) far beyond the rounding of
+//! Floating point: every radius is padded (`FanPad`) far beyond the rounding of
 //! the points and of the exact tests (a grazing contact is reported within about
 //! 2e-8 of the distance to the obstacle's centre), each interval is widened by one
 //! bucket on each side (the azimuth of P − m is computed without trigonometry, to
-//! within a few ulps), and sensors within [`CLOSE`] of m (whose azimuth rounding
+//! within a few ulps), and sensors within `CLOSE` of m (whose azimuth rounding
 //! could make it wrong) use the list of obstacles within reach of that disc instead.
 //! Sensors farther than the fan's range fall back to [`World::any_contact`].
 
@@ -76,7 +76,7 @@ pub struct SightFan {
     /// `entries[starts[b]..starts[b + 1]]` is bucket b, nearest first.
     starts: Vec<u32>,
     entries: Vec<Entry>,
-    /// The obstacles within reach of a sensor within [`CLOSE`] of the marker.
+    /// The obstacles within reach of a sensor within `CLOSE` of the marker.
     close: Vec<Entry>,
 }
 
@@ -108,10 +108,10 @@ impl SightFan {
     pub fn may_block(&self, sensor: &Point3<f64>) -> bool {
         let (dx, dy) = (sensor.x - self.x, sensor.y - self.y);
         let l = (dx * dx + dy * dy).sqrt();
-        if !(l <= self.range) || self.starts.is_empty() {
+        if l.is_nan() || l > self.range || self.starts.is_empty() {
             return true;
         }
-        self.list(dx, dy, l).first().is_some_and(|e| !(e.from > l))
+        self.list(dx, dy, l).first().is_some_and(|e| e.from <= l || e.from.is_nan())
     }
 
     /// The entries for a sensor at (dx, dy) from the marker, `l` = |(dx, dy)| ≤ range.
@@ -135,7 +135,7 @@ impl World {
 
     pub(crate) fn sight_fan_padded(&self, marker: &Point3<f64>, radius: f64, range: f64, pad: FanPad) -> SightFan {
         let (mx, my) = (marker.x, marker.y);
-        let mut listed: Vec<(Entry, std::ops::Range<usize>, bool)> = Vec::new();
+        let mut listed: Vec<(Entry, std::ops::Range<usize>)> = Vec::new();
         for (i, leaf) in self.leaves.iter().enumerate() {
             // The footprint: a disc around (cx, cy) of radius r.
             let (cx, cy, r) = match leaf {
@@ -159,8 +159,8 @@ impl World {
             let width = 2.0 * PI / BUCKETS as f64;
             let widen = if pad.widen { width } else { 0.0 };
             let half = if d > reach { (reach / d).asin() } else { PI };
-            if !(half + widen < PI) {
-                listed.push((entry, 0..BUCKETS, true));
+            if half + widen >= PI || half.is_nan() {
+                listed.push((entry, 0..BUCKETS));
                 continue;
             }
             let azimuth = (cy - my).atan2(cx - mx);
@@ -171,15 +171,15 @@ impl World {
             let first = edge(azimuth - half - widen);
             let last = edge(azimuth + half + widen);
             let count = (last + BUCKETS - first) % BUCKETS + 1;
-            listed.push((entry, first..first + count, false));
+            listed.push((entry, first..first + count));
         }
         let mut per_bucket: Vec<Vec<Entry>> = vec![Vec::new(); BUCKETS];
         let mut close = Vec::new();
-        for (entry, buckets, _) in &listed {
+        for (entry, buckets) in &listed {
             for b in buckets.clone() {
                 per_bucket[b % BUCKETS].push(*entry);
             }
-            if !(entry.from > CLOSE) {
+            if entry.from <= CLOSE || entry.from.is_nan() {
                 close.push(*entry);
             }
         }
@@ -210,7 +210,7 @@ impl World {
     ) -> bool {
         let (dx, dy) = (sensor.x - fan.x, sensor.y - fan.y);
         let l = (dx * dx + dy * dy).sqrt();
-        if !(l <= fan.range) || fan.starts.is_empty() {
+        if l.is_nan() || l > fan.range || fan.starts.is_empty() {
             return self.any_contact(segments);
         }
         for e in fan.list(dx, dy, l) {
