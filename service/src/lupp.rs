@@ -27,7 +27,7 @@ use dyfos_shared::params::Params;
 use dyfos_shared::posterior::{Belief, Prior};
 use dyfos_shared::sdsmm::{Features, NoiseModel, Sdsmm};
 use dyfos_shared::sensor::{SearchSpace, SensorPose, SensorRig, SensorState};
-use dyfos_shared::world::{Blocker, Segment, World};
+use dyfos_shared::world::{Blocker, Nearby, Segment, SightFan, World};
 use std::f64::consts::FRAC_1_SQRT_2;
 
 /// The constraint that rejected a candidate (SPEC §5).
@@ -142,6 +142,10 @@ pub struct Lupp<'a> {
     reach: f64,
     /// The box spanned by `targets`.
     target_box: (Point3<f64>, Point3<f64>),
+    /// The obstacles that can block a sight line, by the sensor's azimuth from the marker.
+    fan: SightFan,
+    /// The obstacles near every collision star of the query.
+    nearby: Nearby,
 }
 
 /// Segment checks of one candidate a caller has already proved to pass (by a
@@ -170,6 +174,14 @@ impl<'a> Lupp<'a> {
             Point3::new(marker.x + params.rover_radius * a.cos(), marker.y + params.rover_radius * a.sin(), marker.z)
         }));
         let target_box = targets.iter().fold((marker, marker), |(lo, hi), q| (lo.inf(q), hi.sup(q)));
+        // Sensors lie within ρ_max of the marker; the fan serves them all (a sensor
+        // beyond, by rounding, is answered by the BVH, the same verdict).
+        let fan = world.sight_fan(&marker, params.rover_radius, params.rho_max * (1.0 + 1e-9));
+        // Viewers lie within ρ_max + |t_vs| of the marker, their stars `reach` around
+        // them (a star outside the region, by rounding, is answered by the BVH).
+        let reach = params.viewer_radius + params.safety_margin;
+        let around = Vector3::repeat((params.rho_max + params.t_vs.norm() + reach) * (1.0 + 1e-9));
+        let nearby = world.nearby(&(marker - around), &(marker + around));
         Lupp {
             world,
             model,
@@ -181,8 +193,10 @@ impl<'a> Lupp<'a> {
             half_fov_tangents: Features::half_fov_tangents(params),
             targets,
             heading: theta,
-            reach: params.viewer_radius + params.safety_margin,
+            reach,
             target_box,
+            fan,
+            nearby,
         }
     }
 
@@ -263,13 +277,17 @@ impl<'a> Lupp<'a> {
         if !self.in_workspace(&pose.viewer_position) {
             return Some(Violation::Workspace);
         }
-        if !cleared.collision && self.world.any_contact(&self.collision_rays(pose)) {
-            return Some(Violation::Collision);
+        if !cleared.collision {
+            let (lo, hi) = self.collision_box(pose);
+            if self.world.any_contact_near(&self.nearby, &lo, &hi, || self.collision_rays(pose)) {
+                return Some(Violation::Collision);
+            }
         }
-        if cleared.occlusion {
+        if cleared.occlusion || !self.fan.may_block(&pose.position) {
             return None;
         }
         let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
+        let (lo, hi) = self.sight_box(pose);
         for chunk in self.targets.chunks(SIGHT_BATCH) {
             let mut n = 0;
             for q in chunk {
@@ -278,7 +296,7 @@ impl<'a> Lupp<'a> {
                     n += 1;
                 }
             }
-            if self.world.any_contact(&batch[..n]) {
+            if self.world.any_sight_contact(&self.fan, &pose.position, &batch[..n], &lo, &hi) {
                 return Some(Violation::Occlusion);
             }
         }

@@ -5,7 +5,9 @@
 //! ([`World::apply`]), or fails whole and leaves the old one as it was: that is what
 //! makes map updates atomic for the daemon. Queries go through a bounding-volume
 //! hierarchy (parry's `Bvh`) whose leaves are the obstacles, plus one leaf for the
-//! voxel grid, each tested exactly.
+//! voxel grid, each tested exactly. A search's per-candidate queries go through two
+//! per-query indexes over the same leaves instead, with the same verdicts: the
+//! leaves near every collision star ([`Nearby`]) and the sight fan ([`SightFan`]).
 //!
 //! ```
 //! use dyfos_shared::world::{Bounds, MapDelta, Obstacle, Segment, Sun, VerticalCylinder, World};
@@ -20,6 +22,8 @@
 //! ```
 
 mod delta;
+mod fan;
+mod nearby;
 mod obstacle;
 pub mod octomap;
 mod region;
@@ -28,6 +32,8 @@ mod voxels;
 
 pub(crate) use delta::StoredDelta;
 pub use delta::{MapDelta, MapDeltaError, MapDeltaErrorKind};
+pub use fan::SightFan;
+pub use nearby::Nearby;
 pub use obstacle::{AxisBox, Obstacle, ObstacleError, VerticalCylinder};
 pub use segment::{Segment, SegmentEnd};
 pub use voxels::{CellIndex, VoxelBlock, VoxelError, VoxelGrid};
@@ -322,6 +328,15 @@ impl World {
         let Some((lo, hi)) = span(segments) else {
             return false;
         };
+        self.any_contact_within(segments, &lo, &hi)
+    }
+
+    /// [`World::any_contact`] for segments the caller knows lie in the closed box
+    /// `[lo, hi]` (a box in closed form, e.g. a collision star's cube; a segment's
+    /// end may round outside it by far less than the leaves' padding): the same
+    /// verdict, without computing the segments' span.
+    pub fn any_contact_within(&self, segments: &[Segment], lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+        let (lo, hi) = (*lo, *hi);
         // Gather the leaves near the whole batch once (the batch is compact: a
         // viewer's collision star, or the sight lines to one rover).
         let mut near = [0u32; GATHER_CAPACITY];

@@ -1,0 +1,389 @@
+//! The sight fan: which obstacles can block the sight lines of one query.
+//!
+//! Every sight line of a query runs from the sensor P to a target q within `radius`
+//! (R) of the marker m, in xy. The point `P + t·(q − P)` lies within `t·|q − m| ≤ R`
+//! (in xy) of the point `P + t·(m − P)` of the segment m–P, so every sight line lies
+//! within R of that segment, in xy. An obstacle whose xy footprint (a disc of radius
+//! r around c, at distance D from m) stays farther than r + R from the segment m–P
+//! cannot touch any of them. Two cheap tests prove that:
+//!
+//! - distance: every point of the segment is within L = |P − m| of m, so the
+//!   footprint is out of reach when D − r − R > L;
+//! - azimuth: seen from m, the segment points along one azimuth α; the distance from
+//!   c to the ray from m at α is `D·sin δ` (δ: the angle between α and c's azimuth,
+//!   below π/2) or at least D, so the footprint is out of reach when
+//!   `δ > asin((r + R)/D)`.
+//!
+//! [`World::sight_fan`] does all of that once per query: it lists each obstacle (and
+//! the voxel grid, by its box) in the azimuth buckets its interval covers, nearest
+//! first with the smallest L at which it matters. A candidate then looks up the one
+//! bucket of P − m and runs the exact tests only on the obstacles listed there up to
+//! L. The verdict is [`World::any_contact`]'s, bit for bit: the exact tests are the
+//! same and an obstacle is left out only when it cannot touch any segment.
+//!
+//! Floating point: every radius is padded (`FanPad`) far beyond the rounding of
+//! the points and of the exact tests (a grazing contact is reported within about
+//! 2e-8 of the distance to the obstacle's centre), each interval is widened by one
+//! bucket on each side (the azimuth of P − m is computed without trigonometry, to
+//! within a few ulps), and sensors within `CLOSE` of m (whose azimuth rounding
+//! could make it wrong) use the list of obstacles within reach of that disc instead.
+//! Sensors farther than the fan's range fall back to [`World::any_contact`].
+
+use super::{Leaf, Segment, World};
+use crate::math::Point3;
+use std::f64::consts::PI;
+
+/// Azimuth buckets around the marker.
+const BUCKETS: usize = 128;
+
+/// Sensors at most this far from the marker (in xy) use the list of obstacles near
+/// the marker, not a bucket: there the azimuth of P − m is not well defined.
+const CLOSE: f64 = 0.01;
+
+/// How much every footprint's radius grows, m: an absolute part and a part per metre
+/// of distance involved (the exact tests' rounding grows with the distances).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct FanPad {
+    absolute: f64,
+    relative: f64,
+    /// Whether intervals are widened by a bucket on each side.
+    widen: bool,
+}
+
+impl FanPad {
+    /// The pad the queries use.
+    pub(crate) const SAFE: FanPad = FanPad { absolute: 1e-6, relative: 1e-7, widen: true };
+}
+
+/// An obstacle in a bucket: its leaf, and the distance of the sensor from the marker
+/// (xy) from which it may block a sight line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Entry {
+    from: f64,
+    leaf: u32,
+}
+
+/// The obstacles that can block a query's sight lines, by azimuth from the marker
+/// ([`World::sight_fan`]). Built once per query; a candidate's lookup allocates
+/// nothing.
+#[derive(Debug, Clone, Default)]
+pub struct SightFan {
+    /// The marker, xy.
+    x: f64,
+    y: f64,
+    /// Sensors farther than this from the marker (xy) fall back to the BVH.
+    range: f64,
+    /// `entries[starts[b]..starts[b + 1]]` is bucket b, nearest first.
+    starts: Vec<u32>,
+    entries: Vec<Entry>,
+    /// The obstacles within reach of a sensor within `CLOSE` of the marker.
+    close: Vec<Entry>,
+}
+
+/// Where an azimuth falls in [0, 4): a pseudo-angle (the "diamond angle"), monotone
+/// in the azimuth over [0, 2π), without trigonometry.
+#[inline]
+fn diamond(dx: f64, dy: f64) -> f64 {
+    if dy >= 0.0 {
+        if dx >= 0.0 { dy / (dx + dy) } else { 1.0 - dx / (dy - dx) }
+    } else if dx < 0.0 {
+        2.0 + dy / (dx + dy)
+    } else {
+        3.0 + dx / (dx - dy)
+    }
+}
+
+/// The bucket of the direction (dx, dy), not both zero.
+#[inline]
+fn bucket(dx: f64, dy: f64) -> usize {
+    // The quotients are in [0, 1]; NaN (never for a nonzero vector) maps to 0.
+    ((diamond(dx, dy) * (BUCKETS as f64 / 4.0)) as usize).min(BUCKETS - 1)
+}
+
+impl SightFan {
+    /// Whether any obstacle may block a sight line from `sensor`: `false` only when
+    /// [`World::any_sight_contact`] is sure to be `false` (nothing listed up to the
+    /// sensor's distance), so the caller need not even make the segments.
+    #[inline]
+    pub fn may_block(&self, sensor: &Point3<f64>) -> bool {
+        let (dx, dy) = (sensor.x - self.x, sensor.y - self.y);
+        let l = (dx * dx + dy * dy).sqrt();
+        if l.is_nan() || l > self.range || self.starts.is_empty() {
+            return true;
+        }
+        self.list(dx, dy, l).first().is_some_and(|e| e.from <= l || e.from.is_nan())
+    }
+
+    /// The entries for a sensor at (dx, dy) from the marker, `l` = |(dx, dy)| ≤ range.
+    #[inline]
+    fn list(&self, dx: f64, dy: f64, l: f64) -> &[Entry] {
+        if l <= CLOSE {
+            &self.close
+        } else {
+            let b = bucket(dx, dy);
+            &self.entries[self.starts[b] as usize..self.starts[b + 1] as usize]
+        }
+    }
+}
+
+impl World {
+    /// The sight fan of a query whose sight lines all end at targets within `radius`
+    /// (xy) of `marker`, for sensors up to `range` (xy) from it (see [`SightFan`]).
+    pub fn sight_fan(&self, marker: &Point3<f64>, radius: f64, range: f64) -> SightFan {
+        self.sight_fan_padded(marker, radius, range, FanPad::SAFE)
+    }
+
+    pub(crate) fn sight_fan_padded(&self, marker: &Point3<f64>, radius: f64, range: f64, pad: FanPad) -> SightFan {
+        let (mx, my) = (marker.x, marker.y);
+        let mut listed: Vec<(Entry, std::ops::Range<usize>)> = Vec::new();
+        for (i, leaf) in self.leaves.iter().enumerate() {
+            // The footprint: a disc around (cx, cy) of radius r.
+            let (cx, cy, r) = match leaf {
+                Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } => (c.center.x, c.center.y, c.radius),
+                Leaf::Solid { .. } | Leaf::Voxels => {
+                    let b = &self.boxes[i];
+                    let (hx, hy) = (0.5 * (b.maxs.x - b.mins.x), 0.5 * (b.maxs.y - b.mins.y));
+                    (b.mins.x + hx, b.mins.y + hy, hx.hypot(hy))
+                }
+            };
+            let d = (cx - mx).hypot(cy - my);
+            let reach = r + radius;
+            let reach = reach + pad.absolute + pad.relative * (d + range + reach);
+            let from = d - reach;
+            // Out of reach of every sensor the fan serves (a NaN is kept, and then
+            // listed everywhere below).
+            if from > range {
+                continue;
+            }
+            let entry = Entry { from, leaf: i as u32 };
+            let width = 2.0 * PI / BUCKETS as f64;
+            let widen = if pad.widen { width } else { 0.0 };
+            let half = if d > reach { (reach / d).asin() } else { PI };
+            if half + widen >= PI || half.is_nan() {
+                listed.push((entry, 0..BUCKETS));
+                continue;
+            }
+            let azimuth = (cy - my).atan2(cx - mx);
+            let edge = |a: f64| {
+                let (s, c) = a.sin_cos();
+                bucket(c, s)
+            };
+            let first = edge(azimuth - half - widen);
+            let last = edge(azimuth + half + widen);
+            let count = (last + BUCKETS - first) % BUCKETS + 1;
+            listed.push((entry, first..first + count));
+        }
+        let mut per_bucket: Vec<Vec<Entry>> = vec![Vec::new(); BUCKETS];
+        let mut close = Vec::new();
+        for (entry, buckets) in &listed {
+            for b in buckets.clone() {
+                per_bucket[b % BUCKETS].push(*entry);
+            }
+            if entry.from <= CLOSE || entry.from.is_nan() {
+                close.push(*entry);
+            }
+        }
+        let nearest_first = |a: &Entry, b: &Entry| a.from.total_cmp(&b.from).then(a.leaf.cmp(&b.leaf));
+        close.sort_by(nearest_first);
+        let mut starts = Vec::with_capacity(BUCKETS + 1);
+        let mut entries = Vec::new();
+        for mut list in per_bucket {
+            starts.push(entries.len() as u32);
+            list.sort_by(nearest_first);
+            entries.extend(list);
+        }
+        starts.push(entries.len() as u32);
+        SightFan { x: mx, y: my, range, starts, entries, close }
+    }
+
+    /// Whether any of `segments`, the sight lines from `sensor` to targets within the
+    /// fan's radius of its marker, touches anything: [`World::any_contact`]'s verdict,
+    /// bit for bit, by the exact tests of the obstacles the fan lists for `sensor`.
+    /// `[lo, hi]` holds every segment (for the voxel grid's broad phase).
+    pub fn any_sight_contact(
+        &self,
+        fan: &SightFan,
+        sensor: &Point3<f64>,
+        segments: &[Segment],
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+    ) -> bool {
+        let (dx, dy) = (sensor.x - fan.x, sensor.y - fan.y);
+        let l = (dx * dx + dy * dy).sqrt();
+        if l.is_nan() || l > fan.range || fan.starts.is_empty() {
+            return self.any_contact(segments);
+        }
+        for e in fan.list(dx, dy, l) {
+            if e.from > l {
+                break;
+            }
+            let hit = match &self.leaves[e.leaf as usize] {
+                Leaf::Solid { shape, .. } => {
+                    segments.iter().any(|s| shape.first_contact(s).is_some_and(|t| s.reaches(t)))
+                }
+                Leaf::Voxels => self.voxels.as_ref().is_some_and(|v| {
+                    v.may_touch_box(lo, hi) && segments.iter().any(|s| v.first_contact(s).is_some_and(|t| s.reaches(t)))
+                }),
+            };
+            if hit {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::{Point2, Vector3};
+    use crate::world::tests::Lcg;
+    use crate::world::{AxisBox, Bounds, Obstacle, Sun, VerticalCylinder, VoxelGrid};
+    use std::f64::consts::TAU;
+
+    #[test]
+    fn the_pseudo_angle_is_monotone_and_buckets_cover_the_circle() {
+        let mut previous = -1.0;
+        for k in 0..100_000 {
+            let a = TAU * f64::from(k) / 100_000.0;
+            let p = diamond(a.cos(), a.sin());
+            assert!((0.0..4.0).contains(&p) && p >= previous, "{a}: {p} after {previous}");
+            previous = p;
+        }
+        assert_eq!(bucket(1.0, 0.0), 0);
+        assert_eq!(bucket(1.0, -1e-300), BUCKETS - 1);
+        assert_eq!(bucket(-1.0, 0.0), BUCKETS / 2);
+    }
+
+    /// A map of cylinders and boxes around the marker, some with footprints just
+    /// out of reach of the rover's disc or just over it, at the azimuth of a
+    /// perimeter point (`theta` + k·45°), some anywhere, and voxels.
+    fn world_around(rng: &mut Lcg, marker: Point2<f64>, radius: f64, theta: f64, n: usize, voxels: bool) -> World {
+        let obstacles: Vec<(u32, Obstacle)> = (0..n)
+            .map(|i| {
+                let a = if i % 4 == 0 { theta + TAU * (i / 4 % 8) as f64 / 8.0 } else { rng.next() * TAU };
+                let u = Vector3::new(a.cos(), a.sin(), 0.0);
+                let o = if i % 4 == 3 {
+                    let d = rng.next() * 8.0;
+                    let min = Point3::new(marker.x + d * u.x, marker.y + d * u.y, rng.next() * 1.5);
+                    Obstacle::Box(AxisBox { min, max: min + Vector3::new(0.1, 0.1, 0.1) + Vector3::repeat(rng.next()) })
+                } else {
+                    let r = 0.1 + rng.next() * 0.8;
+                    // Grazing the rover's disc (within 1e-5, in or out) or anywhere.
+                    let d = if i % 4 == 0 { radius + r + (rng.next() - 0.5) * 2e-5 } else { 1.0 + rng.next() * 8.0 };
+                    Obstacle::Cylinder(VerticalCylinder {
+                        center: Point2::new(marker.x + d * u.x, marker.y + d * u.y),
+                        radius: r,
+                        height: 0.2 + rng.next() * 4.0,
+                    })
+                };
+                (i as u32 + 1, o)
+            })
+            .collect();
+        let grid = voxels.then(|| {
+            let cells: Vec<_> = (0..80)
+                .map(|_| [(rng.next() * 80.0) as i64, (rng.next() * 80.0) as i64, (rng.next() * 10.0) as i64])
+                .collect();
+            VoxelGrid::new(0.2, Point3::new(marker.x - 8.0, marker.y - 8.0, 0.0), cells).unwrap()
+        });
+        World::new(
+            0,
+            Bounds::new([marker.x - 20.0, marker.y - 20.0, marker.x + 20.0, marker.y + 20.0]).unwrap(),
+            Sun::new(0.5, 0.0).unwrap(),
+            obstacles,
+            grid,
+        )
+        .unwrap()
+    }
+
+    /// The sight lines of a sensor to the marker and its perimeter, as the pipeline
+    /// makes them.
+    fn sight_lines(sensor: &Point3<f64>, marker: &Point3<f64>, radius: f64, theta: f64) -> Vec<Segment> {
+        let mut targets = vec![*marker];
+        targets.extend((0..8).map(|k| {
+            let a = theta + TAU * f64::from(k) / 8.0;
+            Point3::new(marker.x + radius * a.cos(), marker.y + radius * a.sin(), marker.z)
+        }));
+        targets.iter().filter_map(|q| Segment::sight_line(sensor, q, 1e-6)).collect()
+    }
+
+    /// Counts the candidates whose fan verdict differs from the scan's, over random
+    /// sensors: anywhere within range, grazing the listed obstacles, directly above
+    /// the marker, within a hair of it, and beyond the range.
+    fn disagreements(pad: FanPad) -> (usize, usize, usize) {
+        let mut rng = Lcg(41);
+        let (mut wrong, mut hits, mut misses) = (0, 0, 0);
+        for (case, (n, voxels)) in
+            [(0, false), (1, false), (4, false), (8, false), (12, false), (30, false), (20, true)]
+                .into_iter()
+                .enumerate()
+        {
+            let marker = Point3::new(rng.next() * 100.0 - 50.0, rng.next() * 100.0 - 50.0, 0.3);
+            let radius = 0.4 + rng.next() * 0.6;
+            let range = 6.0;
+            let theta = rng.next() * TAU;
+            let world = world_around(&mut rng, marker.xy(), radius, theta, n, voxels);
+            let fan = world.sight_fan_padded(&marker, radius, range, pad);
+            for k in 0..4000 {
+                let sensor = match k % 8 {
+                    // Directly above the marker, or within a hair of that.
+                    0 => marker + Vector3::new(0.0, 0.0, 0.5 + rng.next() * 5.0),
+                    1 => marker + Vector3::new((rng.next() - 0.5) * 0.02, (rng.next() - 0.5) * 0.02, 1.0 + rng.next()),
+                    // Beyond the fan's range.
+                    2 => marker + Vector3::new(range + rng.next(), rng.next() - 0.5, 1.0),
+                    _ => {
+                        let a = rng.next() * TAU;
+                        let l = rng.next() * range;
+                        marker + Vector3::new(l * a.cos(), l * a.sin(), rng.next() * 5.0 - 0.3)
+                    }
+                };
+                let segments = sight_lines(&sensor, &marker, radius, theta);
+                let lo = segments.iter().fold(sensor, |lo, s| lo.inf(&s.point_at(s.length)));
+                let hi = segments.iter().fold(sensor, |hi, s| hi.sup(&s.point_at(s.length)));
+                let want = world.any_contact_by_scan(&segments);
+                assert_eq!(world.any_contact(&segments), want);
+                let got = world.any_sight_contact(&fan, &sensor, &segments, &lo, &hi);
+                assert!(fan.may_block(&sensor) || !got);
+                if got != want {
+                    wrong += 1;
+                    assert!(pad != FanPad::SAFE, "case {case}, sensor {sensor:?}, theta {theta}: {got} != {want}");
+                }
+                if want { hits += 1 } else { misses += 1 }
+            }
+        }
+        (wrong, hits, misses)
+    }
+
+    /// The fan's verdicts are the scan's on every candidate, blocked and clear.
+    #[test]
+    fn the_fan_agrees_with_the_scan() {
+        let (wrong, hits, misses) = disagreements(FanPad::SAFE);
+        assert_eq!(wrong, 0);
+        assert!(hits > 3000 && misses > 3000, "{hits} hits, {misses} misses: the test tests little");
+    }
+
+    /// The test above can fail: footprints made 1e-5 m too small leave out
+    /// obstacles that block.
+    #[test]
+    fn a_fan_too_tight_disagrees_with_the_scan() {
+        let (wrong, _, _) = disagreements(FanPad { absolute: -1e-5, relative: 0.0, widen: false });
+        assert!(wrong > 0, "the cases never graze the filter's edge");
+    }
+
+    /// A voxel grid whose box holds the marker is listed in every bucket.
+    #[test]
+    fn a_grid_around_the_marker_is_always_tested() {
+        let marker = Point3::new(0.0, 0.0, 0.3);
+        let grid = VoxelGrid::new(0.5, Point3::new(-10.0, -10.0, 0.0), [[0, 0, 0], [39, 39, 3]]).unwrap();
+        let world = World::new(
+            0,
+            Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(),
+            Sun::new(0.5, 0.0).unwrap(),
+            [],
+            Some(grid),
+        )
+        .unwrap();
+        let fan = world.sight_fan(&marker, 0.75, 6.0);
+        assert!(fan.close.len() == 1 && (0..BUCKETS).all(|b| fan.starts[b + 1] - fan.starts[b] == 1));
+    }
+}

@@ -1,0 +1,242 @@
+//! The obstacles near a region: a short list a query makes once for the region all
+//! its collision stars stay in.
+//!
+//! Every viewer position of a query lies within a known distance of the marker
+//! (ρ_max plus the camera's mounting offset), so every collision segment lies in a
+//! box around the marker known before the first candidate. [`World::nearby`] lists
+//! the leaves (obstacles, the voxel grid) whose padded boxes meet that box, once;
+//! a candidate then compares its star's box with those few boxes instead of walking
+//! the BVH, and runs the exact tests on the leaves that meet it.
+//!
+//! The verdict is [`World::any_contact`]'s, bit for bit: a leaf left out of the list
+//! has a padded box that misses the region, so it misses every segment in it (the
+//! padding, 1e-7 m, is far above the rounding of a segment's end point), and the
+//! exact tests are the same. A batch whose box is not inside the region, or a list
+//! too long to pay, falls back to the BVH.
+
+use super::{Leaf, Segment, World};
+use crate::math::Point3;
+
+/// Above this many leaves near the region, a candidate walks the BVH instead.
+const MOST: usize = 48;
+
+/// The leaves whose padded boxes meet a region ([`World::nearby`]).
+#[derive(Debug, Clone, Default)]
+pub struct Nearby {
+    /// The region, `[lo, hi]`.
+    lo: [f64; 3],
+    hi: [f64; 3],
+    /// Per leaf listed: its padded box, `[min x, min y, min z, max x, max y, max z]`.
+    boxes: Vec<[f64; 6]>,
+    leaves: Vec<u32>,
+    /// Too many leaves near the region: use the BVH.
+    crowded: bool,
+}
+
+impl Nearby {
+    /// How many leaves are listed.
+    pub fn len(&self) -> usize {
+        self.leaves.len()
+    }
+
+    /// Whether no leaf is near the region.
+    pub fn is_empty(&self) -> bool {
+        self.leaves.is_empty()
+    }
+}
+
+impl World {
+    /// The leaves near the closed box `[lo, hi]`, for [`World::any_contact_near`].
+    pub fn nearby(&self, lo: &Point3<f64>, hi: &Point3<f64>) -> Nearby {
+        let mut near = Nearby { lo: [lo.x, lo.y, lo.z], hi: [hi.x, hi.y, hi.z], ..Nearby::default() };
+        for (i, b) in self.boxes.iter().enumerate() {
+            let (mins, maxs) = (b.mins, b.maxs);
+            // Not `any(miss)`: a NaN keeps the leaf.
+            if (0..3).any(|a| maxs[a] < lo[a] || mins[a] > hi[a]) {
+                continue;
+            }
+            near.boxes.push([mins.x, mins.y, mins.z, maxs.x, maxs.y, maxs.z]);
+            near.leaves.push(i as u32);
+        }
+        near.crowded = near.leaves.len() > MOST;
+        near
+    }
+
+    /// [`World::any_contact`]'s verdict on the batch `segments` makes, all inside
+    /// the closed box `[lo, hi]`, testing exactly only the listed leaves whose boxes
+    /// meet it; the batch is made only if one does (most stars meet nothing). Falls
+    /// back to the BVH when the box is not inside the list's region.
+    pub fn any_contact_near<S: AsRef<[Segment]>>(
+        &self,
+        near: &Nearby,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+        segments: impl FnOnce() -> S,
+    ) -> bool {
+        let inside = (0..3).all(|a| near.lo[a] <= lo[a] && hi[a] <= near.hi[a]);
+        if !inside || near.crowded {
+            return self.any_contact_within(segments().as_ref(), lo, hi);
+        }
+        let mut made: Option<S> = None;
+        let mut segments = Some(segments);
+        for (b, leaf) in near.boxes.iter().zip(&near.leaves) {
+            if b[3] < lo.x || b[0] > hi.x || b[4] < lo.y || b[1] > hi.y || b[5] < lo.z || b[2] > hi.z {
+                continue;
+            }
+            let leaf = &self.leaves[*leaf as usize];
+            // The grid's box is large: skip it when no occupied cell is near the star,
+            // before making the batch.
+            if let Leaf::Voxels = leaf
+                && !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi))
+            {
+                continue;
+            }
+            let batch = made.get_or_insert_with(|| (segments.take().expect("made once"))());
+            let batch = batch.as_ref();
+            let hit = match leaf {
+                Leaf::Solid { shape, .. } => batch.iter().any(|s| shape.first_contact(s).is_some_and(|t| s.reaches(t))),
+                Leaf::Voxels => self
+                    .voxels
+                    .as_ref()
+                    .is_some_and(|v| batch.iter().any(|s| v.first_contact(s).is_some_and(|t| s.reaches(t)))),
+            };
+            if hit {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::{Point2, Vector3};
+    use crate::world::tests::Lcg;
+    use crate::world::{AxisBox, Bounds, Obstacle, Sun, VerticalCylinder, VoxelGrid};
+    use std::f64::consts::{FRAC_1_SQRT_2, TAU};
+
+    fn world(rng: &mut Lcg, n: usize, voxels: bool) -> World {
+        let obstacles: Vec<(u32, Obstacle)> = (0..n)
+            .map(|i| {
+                let o = if i % 3 == 2 {
+                    let min = Point3::new(rng.next() * 16.0 - 8.0, rng.next() * 16.0 - 8.0, rng.next() * 3.0);
+                    Obstacle::Box(AxisBox { min, max: min + Vector3::repeat(0.1) + Vector3::repeat(rng.next()) })
+                } else {
+                    Obstacle::Cylinder(VerticalCylinder {
+                        center: Point2::new(rng.next() * 16.0 - 8.0, rng.next() * 16.0 - 8.0),
+                        radius: 0.1 + rng.next() * 0.7,
+                        height: 0.3 + rng.next() * 5.0,
+                    })
+                };
+                (i as u32 + 1, o)
+            })
+            .collect();
+        let grid = voxels.then(|| {
+            let cells: Vec<_> = (0..200)
+                .map(|_| [(rng.next() * 80.0) as i64, (rng.next() * 80.0) as i64, (rng.next() * 25.0) as i64])
+                .collect();
+            VoxelGrid::new(0.2, Point3::new(-8.0, -8.0, 0.0), cells).unwrap()
+        });
+        World::new(0, Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), obstacles, grid)
+            .unwrap()
+    }
+
+    /// A collision star as the pipeline makes it: 8 horizontal rays at the yaw and
+    /// its multiples of 45°, then up and down, each `reach` long.
+    fn star(p: Point3<f64>, yaw: f64, reach: f64) -> ([Segment; 10], Point3<f64>, Point3<f64>) {
+        let (s, c) = yaw.sin_cos();
+        let mut rays = [Segment::closed(p, Vector3::z(), reach); 10];
+        let dirs = [(1.0, 0.0), (FRAC_1_SQRT_2, FRAC_1_SQRT_2), (0.0, 1.0), (-FRAC_1_SQRT_2, FRAC_1_SQRT_2)];
+        for (k, ray) in rays.iter_mut().take(8).enumerate() {
+            let (dx, dy) = if k < 4 { dirs[k] } else { (-dirs[k - 4].0, -dirs[k - 4].1) };
+            ray.dir = Vector3::new(c * dx - s * dy, s * dx + c * dy, 0.0);
+        }
+        rays[9].dir = -Vector3::z();
+        let r = Vector3::repeat(reach);
+        (rays, p - r, p + r)
+    }
+
+    /// Counts disagreements with the scan over collision stars placed anywhere in
+    /// the region, and stars grazing obstacles.
+    fn disagreements(shrink: f64) -> (usize, usize, usize) {
+        let mut rng = Lcg(17);
+        let (mut wrong, mut hits, mut misses) = (0, 0, 0);
+        for (n, voxels) in [(0, false), (3, false), (25, false), (80, false), (10, true)] {
+            let world = world(&mut rng, n, voxels);
+            let marker = Point3::new(rng.next() * 4.0 - 2.0, rng.next() * 4.0 - 2.0, 0.3);
+            let (half, reach) = (6.2, 0.6);
+            let r = Vector3::repeat(half + reach);
+            let mut near = world.nearby(&(marker - r), &(marker + r));
+            // Shrinks every listed box, to show the cases graze their edges.
+            for b in &mut near.boxes {
+                for a in 0..3 {
+                    b[a] += shrink;
+                    b[a + 3] -= shrink;
+                }
+            }
+            let obstacles: Vec<Obstacle> = world.obstacles().values().copied().collect();
+            for k in 0..6000 {
+                let graze = if k % 3 == 0 { obstacles.get(k % obstacles.len().max(1)) } else { None };
+                // Grazing: the +x ray ends 1e-9 inside a cylinder's side, or on a box's
+                // top face 1e-9 past its side.
+                let (p, yaw) = match graze {
+                    Some(Obstacle::Cylinder(c)) => {
+                        let z = rng.next() * c.height;
+                        (Point3::new(c.center.x - c.radius - reach + 1e-9, c.center.y, z), 0.0)
+                    }
+                    Some(Obstacle::Box(b)) => {
+                        let y = b.min.y + rng.next() * (b.max.y - b.min.y);
+                        (Point3::new(b.min.x - reach + 1e-9, y, b.max.z), 0.0)
+                    }
+                    None => {
+                        let v = Vector3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5) * 2.0 * half;
+                        (marker + v / 3f64.sqrt(), rng.next() * TAU)
+                    }
+                };
+                let (rays, lo, hi) = star(p, yaw, reach);
+                let want = world.any_contact_by_scan(&rays);
+                let got = world.any_contact_near(&near, &lo, &hi, || rays);
+                if got != want {
+                    wrong += 1;
+                    assert!(shrink > 0.0, "{rays:?}: {got} != {want}");
+                }
+                if want { hits += 1 } else { misses += 1 }
+            }
+        }
+        (wrong, hits, misses)
+    }
+
+    #[test]
+    fn the_short_list_agrees_with_the_scan() {
+        let (wrong, hits, misses) = disagreements(0.0);
+        assert_eq!(wrong, 0);
+        assert!(hits > 3000 && misses > 3000, "{hits} hits, {misses} misses: the test tests little");
+    }
+
+    /// The test above can fail: boxes shrunk by 1e-6 m leave out obstacles that
+    /// a ray touches.
+    #[test]
+    fn a_short_list_of_boxes_too_small_disagrees_with_the_scan() {
+        let (wrong, _, _) = disagreements(1e-6);
+        assert!(wrong > 0, "the cases never graze a box");
+    }
+
+    /// A batch outside the region, or a crowded region, is answered by the BVH.
+    #[test]
+    fn batches_outside_the_region_fall_back() {
+        let mut rng = Lcg(2);
+        let world = world(&mut rng, 300, false);
+        let near = world.nearby(&Point3::new(-1.0, -1.0, 0.0), &Point3::new(1.0, 1.0, 1.0));
+        assert!(!near.crowded && !near.is_empty());
+        let crowded = world.nearby(&Point3::new(-10.0, -10.0, 0.0), &Point3::new(10.0, 10.0, 10.0));
+        assert!(crowded.crowded);
+        for k in 0..3000 {
+            let p = Point3::new(rng.next() * 16.0 - 8.0, rng.next() * 16.0 - 8.0, rng.next() * 4.0);
+            let (rays, lo, hi) = star(p, f64::from(k) * 0.1, 0.6);
+            let want = world.any_contact_by_scan(&rays);
+            assert_eq!(world.any_contact_near(&near, &lo, &hi, || rays), want);
+            assert_eq!(world.any_contact_near(&crowded, &lo, &hi, || rays), want);
+        }
+    }
+}
