@@ -108,7 +108,7 @@ fn differential_evolution_allocates_per_search_not_per_candidate() {
     for de in [DifferentialEvolution::dyfos(), DifferentialEvolution::scipy()] {
         let mut evaluations = Vec::new();
         let mut allocations = Vec::new();
-        for budget in [200, 600, 5_000] {
+        for budget in [60, 200, 5_000] {
             let control = SearchControl { budget: Some(budget), ..SearchControl::seeded(4) };
             let mut outcome = None;
             let info = measure(|| outcome = Some(de.search(&lupp, &control)));
