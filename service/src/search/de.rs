@@ -15,32 +15,31 @@
 //! trial wins, as `inf <= inf` does in SciPy); the population is converged only when
 //! every member is feasible.
 //!
-//! The `dyfos` default spends its evaluations where they pay: a small population
-//! (4 × dims = 16 members) that stops once its best has stalled ([`Stall`]: no drop
-//! over 1e-3 in 3 generations), then a raced polish ([`Polish::Raced`]). The
-//! evolution only has to land in the right basin; SciPy's own rule waits for the
-//! whole population to gather (its tolerance is relative to |mean E| ≈ 15) and still
-//! stops ≈0.04 above the grid optimum, which the polish closes anyway. The polish
-//! is a pattern search with a step per direction, that first jumps to the image
-//! centre and the nearest range and moves ψ and φ together ([`Polish::Adaptive`]);
-//! the race runs it for a short heat from the best member and from the member
-//! turned about the rover by each eighth of a turn of the viewer yaw, then goes on
-//! from the lowest. The turns catch the evolution settling
-//! on the wrong side of the rover: an axis-aligned noise model (`anisotropic`,
-//! `learned`) has the same shape on opposite sides, and a small population often
-//! misses a yaw basin where only glare and obstacles differ. About 3–4 × fewer
-//! evaluations than the earlier default (SciPy's search, then a full polish from
-//! the best member and from its mirror image, [`Polish::Mirrored`]) at the same
-//! median and 95th-percentile gap to `brute`; its tail differs (on 200 maps a few
-//! end further above `brute` than before, a few less far: `bench/RESULTS.md`).
+//! The `dyfos` default adds a polish ([`Polish::Mirrored`]): a pattern search from
+//! the best member with a step per direction, that also tries the image centre and
+//! moves ψ and φ together ([`Polish::Adaptive`]), for at most 150 evaluations, then
+//! the same from the member's mirror image through the rover (viewer yaw + π), for
+//! at most 150 more. SciPy's tolerance is relative to |mean E| ≈ 15, so its search
+//! stops ≈0.04 above the grid optimum; the polish closes that gap. The mirror start
+//! catches the evolution settling on the wrong side of the rover, where an
+//! axis-aligned noise model (`anisotropic`, `learned`) has the same shape and only
+//! glare and obstacles differ.
 //!
-//! Interpretation of SPEC §8, which names SciPy's defaults for `dyfos` and allows
-//! "improvements on it … when a benchmark shows they find lower costs at little
-//! extra time": the population size is read as one of the settings such an
-//! improvement may change, since the stall rule and the race only pay with a small
-//! one. SciPy's search stays available bit for bit as `dyfos-scipy`
-//! ([`DifferentialEvolution::scipy`]). A compass search (± each axis at one shared step), the
-//! first polish, stalled on the ridge |u| = |v| of the image error and spent its
+//! A faster setting, [`DifferentialEvolution::raced`], is built but not the default:
+//! 16 members stopped once their best has stalled ([`Stall`]), then a raced polish
+//! ([`Polish::Raced`]: short heats from the best member turned about the rover by
+//! each eighth of a yaw turn, then the lowest polished on). It meets the gap goals
+//! to `brute` with ≈ 4 × fewer evaluations, but where the cost is flat (equal to
+//! 1e-6 over a range of ρ, say) it settles on other poses than the default, and in
+//! the simulated missions those were observed less often (the true rover, off its
+//! belief, out of range or view); the default stays until that is understood.
+//! (SPEC §8 names SciPy's defaults for `dyfos` and allows improvements "when a
+//! benchmark shows they find lower costs at little extra time"; `raced` reads the
+//! population size as one of the settings such an improvement may change.
+//! SciPy's search stays available bit for bit as `dyfos-scipy`.)
+//!
+//! A compass search (± each axis at one shared step), the first polish, stalled on
+//! the ridge |u| = |v| of the image error and spent its
 //! evaluations walking flat directions. Today's figures: `bench/RESULTS.md`,
 //! "Numerical"; the runs that chose between the polishes: `bench/history/2026-11.md`.
 
@@ -140,11 +139,20 @@ impl DifferentialEvolution {
         }
     }
 
-    /// The `dyfos` default: SciPy's search with 16 members, stopped once its best
-    /// has stalled (1e-3 over 3 generations), then the raced polish from eight turns
-    /// of the viewer yaw (heats of 15 evaluations, then at most 150 from the lowest),
-    /// down to steps of 1e-4 of the unit cube.
+    /// The `dyfos` default: SciPy's search, then the adaptive pattern-search polish
+    /// from the best member and from its mirror image (at most 150 evaluations each).
     pub fn dyfos() -> Self {
+        DifferentialEvolution { polish: Polish::Mirrored { evaluations: 150 }, ..Self::scipy() }
+    }
+
+    /// The fast setting, not the default: SciPy's search with 16 members, stopped
+    /// once its best has stalled (1e-3 over 3 generations), then the raced polish
+    /// from eight turns of the viewer yaw (heats of 15 evaluations, then at most 150
+    /// from the lowest), down to steps of 1e-4 of the unit cube. It meets the gap
+    /// goals with ≈ 4 × fewer evaluations, but where the cost is flat it settles on
+    /// other poses than [`DifferentialEvolution::dyfos`], and in the simulated
+    /// missions those are observed less often (the true rover out of range or view).
+    pub fn raced() -> Self {
         DifferentialEvolution {
             popsize: 4,
             stall: Some(Stall { epsilon: 1e-3, generations: 3 }),
@@ -546,7 +554,7 @@ mod tests {
     fn the_raced_polish_spends_its_heats_and_one_polish_and_never_loses() {
         let s = mirror_basin();
         with_lupp(&s, |lupp| {
-            let raced = DifferentialEvolution::dyfos();
+            let raced = DifferentialEvolution::raced();
             let Polish::Raced { turns, heats, evaluations } = raced.polish else { panic!("{raced:?}") };
             let bare = DifferentialEvolution { polish: Polish::Off, ..raced };
             for seed in 0..8 {
@@ -562,19 +570,16 @@ mod tests {
     }
 
     #[test]
-    fn the_default_leaves_the_far_side_basin_in_fewer_evaluations() {
+    fn the_raced_setting_leaves_the_far_side_basin_in_fewer_evaluations() {
         let s = mirror_basin();
         with_lupp(&s, |lupp| {
             // The grid optimum, `dyfos solve --algo brute` on this map.
             let brute = -17.973484018360878;
-            let old = DifferentialEvolution {
-                polish: Polish::Mirrored { evaluations: 150 },
-                ..DifferentialEvolution::scipy()
-            };
+            let old = DifferentialEvolution::dyfos();
             let (mut near_old, mut near_new, mut evals_old, mut evals_new) = (0, 0, 0, 0);
             for seed in 0..12 {
                 let control = SearchControl::seeded(seed);
-                let (o, n) = (old.search(lupp, &control), DifferentialEvolution::dyfos().search(lupp, &control));
+                let (o, n) = (old.search(lupp, &control), DifferentialEvolution::raced().search(lupp, &control));
                 near_old += usize::from(o.best.unwrap().cost < brute + 0.01);
                 near_new += usize::from(n.best.unwrap().cost < brute + 0.01);
                 evals_old += o.stats.total;
