@@ -106,23 +106,26 @@ impl SightFan {
     /// sensor's distance), so the caller need not even make the segments.
     #[inline]
     pub fn may_block(&self, sensor: &Point3<f64>) -> bool {
+        self.list(sensor).is_none_or(|(entries, l)| entries.first().is_some_and(|e| e.from <= l || e.from.is_nan()))
+    }
+
+    /// The entries for `sensor`, nearest first, with its distance from the marker
+    /// in the plane; `None` when the fan cannot answer (beyond its range, a NaN, no
+    /// buckets) and the BVH must.
+    #[inline]
+    fn list(&self, sensor: &Point3<f64>) -> Option<(&[Entry], f64)> {
         let (dx, dy) = (sensor.x - self.x, sensor.y - self.y);
         let l = (dx * dx + dy * dy).sqrt();
         if l.is_nan() || l > self.range || self.starts.is_empty() {
-            return true;
+            return None;
         }
-        self.list(dx, dy, l).first().is_some_and(|e| e.from <= l || e.from.is_nan())
-    }
-
-    /// The entries for a sensor at (dx, dy) from the marker, `l` = |(dx, dy)| ≤ range.
-    #[inline]
-    fn list(&self, dx: f64, dy: f64, l: f64) -> &[Entry] {
-        if l <= CLOSE {
-            &self.close
+        let entries = if l <= CLOSE {
+            &self.close[..]
         } else {
             let b = bucket(dx, dy);
             &self.entries[self.starts[b] as usize..self.starts[b + 1] as usize]
-        }
+        };
+        Some((entries, l))
     }
 }
 
@@ -208,24 +211,19 @@ impl World {
         lo: &Point3<f64>,
         hi: &Point3<f64>,
     ) -> bool {
-        let (dx, dy) = (sensor.x - fan.x, sensor.y - fan.y);
-        let l = (dx * dx + dy * dy).sqrt();
-        if l.is_nan() || l > fan.range || fan.starts.is_empty() {
+        let Some((entries, l)) = fan.list(sensor) else {
             return self.any_contact(segments);
-        }
-        for e in fan.list(dx, dy, l) {
+        };
+        for e in entries {
             if e.from > l {
                 break;
             }
-            let hit = match &self.leaves[e.leaf as usize] {
-                Leaf::Solid { shape, .. } => {
-                    segments.iter().any(|s| shape.first_contact(s).is_some_and(|t| s.reaches(t)))
-                }
-                Leaf::Voxels => self.voxels.as_ref().is_some_and(|v| {
-                    v.may_touch_box(lo, hi) && segments.iter().any(|s| v.first_contact(s).is_some_and(|t| s.reaches(t)))
-                }),
-            };
-            if hit {
+            if let Leaf::Voxels = self.leaves[e.leaf as usize]
+                && !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi))
+            {
+                continue;
+            }
+            if self.leaf_touches(e.leaf, segments) {
                 return true;
             }
         }

@@ -322,6 +322,12 @@ impl World {
         }
     }
 
+    /// Whether any of `segments` touches leaf `leaf` up to its own end.
+    #[inline]
+    fn leaf_touches(&self, leaf: u32, segments: &[Segment]) -> bool {
+        segments.iter().any(|s| self.leaf_contact(leaf, s).is_some_and(|t| s.reaches(t)))
+    }
+
     /// Whether any segment touches any obstacle or occupied voxel, each up to its own
     /// [`SegmentEnd`]. Stops at the first contact; allocates nothing.
     pub fn any_contact(&self, segments: &[Segment]) -> bool {

@@ -79,28 +79,19 @@ impl World {
         }
         let mut made: Option<S> = None;
         let mut segments = Some(segments);
-        for (b, leaf) in near.boxes.iter().zip(&near.leaves) {
+        for (b, leaf_id) in near.boxes.iter().zip(&near.leaves) {
             if b[3] < lo.x || b[0] > hi.x || b[4] < lo.y || b[1] > hi.y || b[5] < lo.z || b[2] > hi.z {
                 continue;
             }
-            let leaf = &self.leaves[*leaf as usize];
             // The grid's box is large: skip it when no occupied cell is near the star,
             // before making the batch.
-            if let Leaf::Voxels = leaf
+            if let Leaf::Voxels = self.leaves[*leaf_id as usize]
                 && !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi))
             {
                 continue;
             }
             let batch = made.get_or_insert_with(|| (segments.take().expect("made once"))());
-            let batch = batch.as_ref();
-            let hit = match leaf {
-                Leaf::Solid { shape, .. } => batch.iter().any(|s| shape.first_contact(s).is_some_and(|t| s.reaches(t))),
-                Leaf::Voxels => self
-                    .voxels
-                    .as_ref()
-                    .is_some_and(|v| batch.iter().any(|s| v.first_contact(s).is_some_and(|t| s.reaches(t)))),
-            };
-            if hit {
+            if self.leaf_touches(*leaf_id, batch.as_ref()) {
                 return true;
             }
         }
