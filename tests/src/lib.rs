@@ -123,7 +123,8 @@ static NEXT: AtomicU32 = AtomicU32::new(0);
 pub struct Sandbox {
     /// Service-name prefix, e.g. `t-restart-1234-0/`.
     pub prefix: String,
-    /// iceoryx2 file prefix, e.g. `dyt1234_0_`.
+    /// iceoryx2 file prefix, e.g. `dyt1234_0_`; other hosts of the same test take
+    /// theirs from [`Sandbox::host_domain`].
     pub domain: String,
     /// The daemon's state directory.
     pub state_dir: PathBuf,
@@ -137,6 +138,24 @@ impl Sandbox {
         let state_dir = std::env::temp_dir().join(format!("dyfos-test-{test}-{pid}-{n}"));
         let _ = std::fs::remove_dir_all(&state_dir);
         Sandbox { prefix: format!("t-{test}-{pid}-{n}/"), domain: format!("dyt{pid}_{n}_"), state_dir }
+    }
+
+    /// The iceoryx2 domain of another host of this test, e.g. `dyr1234_0_` for
+    /// `'r'`: removed on drop with the sandbox's own. Killed processes leave their
+    /// files behind, and iceoryx2 stats every file of its folders each time a node
+    /// starts, so leftovers of other domains slow down every later client.
+    pub fn host_domain(&self, host: char) -> String {
+        format!("dy{host}{}", self.domain_suffix())
+    }
+
+    /// What every domain of this sandbox ends with: `1234_0_`.
+    fn domain_suffix(&self) -> &str {
+        &self.domain[3..]
+    }
+
+    /// Whether a file name belongs to one of this sandbox's domains.
+    fn owns_file(&self, name: &str) -> bool {
+        name.starts_with("dy") && name.get(3..).is_some_and(|rest| rest.starts_with(self.domain_suffix()))
     }
 
     /// A client configuration for this sandbox.
@@ -291,7 +310,7 @@ impl Sandbox {
     /// node and service details, event sockets), as paths relative to it.
     pub fn state_leftovers(&self) -> Vec<String> {
         let root = iceoryx_root();
-        state_files(&root, &self.domain)
+        state_files(&root, &|name| name.starts_with(&self.domain))
             .into_iter()
             .map(|p| p.strip_prefix(&root).unwrap_or(&p).display().to_string())
             .collect()
@@ -306,38 +325,39 @@ pub fn iceoryx_root() -> PathBuf {
 
 /// Files under `root` (at most three levels: `root/nodes/<node>/<file>`) whose name
 /// starts with `domain`.
-fn state_files(root: &Path, domain: &str) -> Vec<PathBuf> {
-    fn walk(dir: &Path, domain: &str, depth: u32, out: &mut Vec<PathBuf>) {
+fn state_files(root: &Path, owns: &dyn Fn(&str) -> bool) -> Vec<PathBuf> {
+    fn walk(dir: &Path, owns: &dyn Fn(&str) -> bool, depth: u32, out: &mut Vec<PathBuf>) {
         let Ok(entries) = std::fs::read_dir(dir) else { return };
         for e in entries.flatten() {
             let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
             if is_dir && depth > 0 {
-                walk(&e.path(), domain, depth - 1, out);
-            } else if !is_dir && e.file_name().to_string_lossy().starts_with(domain) {
+                walk(&e.path(), owns, depth - 1, out);
+            } else if !is_dir && owns(&e.file_name().to_string_lossy()) {
                 out.push(e.path());
             }
         }
     }
     let mut out = Vec::new();
-    walk(root, domain, 2, &mut out);
+    walk(root, owns, 2, &mut out);
     out.sort();
     out
 }
 
 impl Drop for Sandbox {
-    /// Removes the state directory and everything of the domain that a killed
-    /// process left behind, in `/dev/shm` and in iceoryx2's state folder alike
-    /// (removing one without the other would leave iceoryx2 confused).
+    /// Removes the state directory and everything of the sandbox's domains (its
+    /// own and its other hosts') that a killed process left behind, in `/dev/shm`
+    /// and in iceoryx2's state folder alike (removing one without the other would
+    /// leave iceoryx2 confused).
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.state_dir);
         if let Ok(entries) = std::fs::read_dir("/dev/shm") {
             for e in entries.flatten() {
-                if e.file_name().to_string_lossy().starts_with(&self.domain) {
+                if self.owns_file(&e.file_name().to_string_lossy()) {
                     let _ = std::fs::remove_file(e.path());
                 }
             }
         }
-        for file in state_files(&iceoryx_root(), &self.domain) {
+        for file in state_files(&iceoryx_root(), &|name| self.owns_file(name)) {
             let _ = std::fs::remove_file(&file);
             // A node's folder held only that node's files: remove it once empty.
             if let Some(dir) = file.parent().filter(|d| d.parent().is_some_and(|p| p.ends_with("nodes"))) {
@@ -662,5 +682,34 @@ impl RawClient {
         wait_for("a map reply", || {
             pending.receive().expect("receive").map(|r| (*r.user_header(), r.payload().to_vec()))
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sandbox_removes_its_hosts_files_and_no_other_sandboxs() {
+        let sandbox = Sandbox::new("owns");
+        let other = Sandbox::new("owns");
+        let dir = iceoryx_root().join("services");
+        std::fs::create_dir_all(&dir).unwrap();
+        let mine = [
+            PathBuf::from("/dev/shm").join(format!("{}leftover", sandbox.domain)),
+            PathBuf::from("/dev/shm").join(format!("{}leftover", sandbox.host_domain('r'))),
+            dir.join(format!("{}leftover.service", sandbox.host_domain('i'))),
+        ];
+        let theirs = PathBuf::from("/dev/shm").join(format!("{}leftover", other.host_domain('r')));
+        for path in mine.iter().chain([&theirs]) {
+            std::fs::write(path, b"left by a killed process").unwrap();
+        }
+        drop(sandbox);
+        for path in &mine {
+            assert!(!path.exists(), "{} outlived its sandbox", path.display());
+        }
+        assert!(theirs.exists(), "another sandbox's file was removed");
+        drop(other);
+        assert!(!theirs.exists());
     }
 }

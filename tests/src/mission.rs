@@ -123,7 +123,7 @@ impl<'a> MissionFiles<'a> {
     /// The iceoryx2 domain of the rover's host in a two-host test (the viewer's
     /// host, with the daemon and the recorder, is the sandbox's own domain).
     pub fn rover_domain(&self) -> String {
-        format!("dyr{}", &self.sandbox.domain[3..])
+        self.sandbox.host_domain('r')
     }
 
     /// The mission's credentials file for `dyfos-link` (written on first use).

@@ -337,7 +337,7 @@ fn a_third_host_without_the_credentials_cannot_publish_a_measurement() {
     // published on its host again and again.
     let wrong = sandbox.state_dir.with_extension("wrong-credentials");
     std::fs::write(&wrong, "crew:not-the-password\n").unwrap();
-    let intruder_domain = format!("dyi{}", &sandbox.domain[3..]);
+    let intruder_domain = sandbox.host_domain('i');
     let mut intruders = Vec::new();
     for credentials in [Some(&wrong), None] {
         let mut cmd = hosts.command(INTRUDER, &dyfos_tests::bin("dyfos-link"));
