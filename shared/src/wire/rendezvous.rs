@@ -319,15 +319,12 @@ impl RendezvousRequest {
                 format!("deadline = {} µs exceeds the limit of {MAX_DEADLINE_MICROS} µs (one hour)", h.deadline_micros),
             ));
         }
-        if records.len() > MAX_INLINE_DELTAS {
-            return Err(Rejection::new(
-                Status::OverCapacity,
-                format!(
-                    "{} inline delta records exceed the limit of {MAX_INLINE_DELTAS}; send large changes to the map service first",
-                    records.len()
-                ),
-            ));
-        }
+        Rejection::at_most(
+            records.len(),
+            MAX_INLINE_DELTAS,
+            "inline delta records",
+            "; send large changes to the map service first",
+        )?;
         let deltas = decode_batch(records)?;
         let request = RendezvousRequest {
             map: h.map_id,
