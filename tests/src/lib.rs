@@ -413,25 +413,7 @@ pub fn data(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(path)
 }
 
-/// A fresh directory `dyfos-NAME-PID` under the system's temporary directory,
-/// removed on drop.
-pub struct Scratch(pub PathBuf);
-
-impl Scratch {
-    /// Makes the directory, empty (what an earlier run of the same name left is removed).
-    pub fn new(name: &str) -> Scratch {
-        let dir = std::env::temp_dir().join(format!("dyfos-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("scratch dir");
-        Scratch(dir)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+pub use dyfos_process::scratch::Scratch;
 
 /// The scenario file `path` of the test data.
 pub fn scenario(path: &str) -> dyfos_shared::scenario::Scenario {
