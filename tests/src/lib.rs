@@ -490,6 +490,20 @@ impl RawFixture {
         let raw = RawClient::open(&sandbox);
         RawFixture { raw, client, daemon, sandbox }
     }
+
+    /// Creates map `id` ([`create_test_map`]) with `deltas` applied (at version 0, as
+    /// one batch of one delta each); returns its bounds and the map as the daemon
+    /// holds it, what bad requests must leave unchanged.
+    pub fn test_map_with(
+        &mut self,
+        id: u64,
+        deltas: &[dyfos_shared::world::MapDelta],
+    ) -> (dyfos_shared::world::Bounds, dyfos_shared::world::World) {
+        let bounds = create_test_map(&mut self.client, id);
+        let version = self.client.apply(id, Some(0), deltas, PATIENCE).expect("apply the deltas");
+        assert_eq!(version, deltas.len() as u64);
+        (bounds, self.client.snapshot(id, PATIENCE).expect("snapshot"))
+    }
 }
 
 /// Every float of a wire parameter block, in field order (`t_vs` as its three):
