@@ -517,22 +517,21 @@ impl GreedyClient {
         let node = node(domain)?;
         let names = dyfos_shared::wire::ServiceNames::new(prefix).map_err(|e| e.to_string())?;
         let services = Services::new(&node, &names);
-        let port = services
-            .rendezvous()
-            .map_err(|e| e.to_string())?
-            .open()
-            .map_err(|e| format!("open {}: {e:?}", names.rendezvous))?
-            .client_builder()
-            .create()
-            .map_err(|e| format!("greedy client: {e:?}"))?;
-        let wake = services
-            .wake()
-            .map_err(|e| e.to_string())?
-            .open()
-            .map_err(|e| format!("open {}: {e:?}", names.wake))?
-            .notifier_builder()
-            .create()
-            .map_err(|e| format!("wake notifier: {e:?}"))?;
+        // Each service opened as the daemon made it, then the port on it.
+        macro_rules! port {
+            ($service:ident, $builder:ident, $port:literal) => {
+                services
+                    .$service()
+                    .map_err(|e| e.to_string())?
+                    .open()
+                    .map_err(|e| format!("open {}: {e:?}", names.$service))?
+                    .$builder()
+                    .create()
+                    .map_err(|e| format!("{}: {e:?}", $port))?
+            };
+        }
+        let port = port!(rendezvous, client_builder, "greedy client");
+        let wake = port!(wake, notifier_builder, "wake notifier");
         Ok(GreedyClient { _node: node, port, wake, next_id: 1 << 40 })
     }
 

@@ -81,11 +81,7 @@ fn ipc(e: impl std::error::Error + Send + Sync + 'static) -> CallError {
 /// Refuses locally (`OverCapacity`, as the daemon would) `n` records of `what` over
 /// `limit`; `advice` ends the message.
 fn at_most(n: usize, limit: usize, what: &str, advice: &str) -> Result<(), CallError> {
-    if n > limit {
-        let detail = format!("{n} {what} exceed the limit of {limit}{advice}");
-        return Err(CallError::Local(Rejection::new(Status::OverCapacity, detail)));
-    }
-    Ok(())
+    Rejection::at_most(n, limit, what, advice).map_err(CallError::Local)
 }
 
 /// A request just sent: on which service, and how long to wait for its reply.

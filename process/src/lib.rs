@@ -11,6 +11,7 @@
 //! - [`abandoned`]: iceoryx2 services whose creator died creating them, removed;
 //! - [`child`]: a child process killed when its owner lets go of it;
 //! - [`netns`]: network namespaces standing for hosts on one machine (Linux);
+//! - [`scratch`]: a test's scratch directory, removed when dropped;
 //! - [`logging`] (feature `logging`): the log on stderr, with its flood limit;
 //! - [`cli`] (feature `cli`): the conventions every dyfos command line keeps.
 //!
@@ -32,4 +33,5 @@ pub mod idle;
 pub mod logging;
 #[cfg(target_os = "linux")]
 pub mod netns;
+pub mod scratch;
 pub mod shutdown;

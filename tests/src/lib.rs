@@ -433,25 +433,7 @@ pub fn data(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(path)
 }
 
-/// A fresh directory `dyfos-NAME-PID` under the system's temporary directory,
-/// removed on drop.
-pub struct Scratch(pub PathBuf);
-
-impl Scratch {
-    /// Makes the directory, empty (what an earlier run of the same name left is removed).
-    pub fn new(name: &str) -> Scratch {
-        let dir = std::env::temp_dir().join(format!("dyfos-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).expect("scratch dir");
-        Scratch(dir)
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+pub use dyfos_process::scratch::Scratch;
 
 /// The scenario file `path` of the test data.
 pub fn scenario(path: &str) -> dyfos_shared::scenario::Scenario {
@@ -527,6 +509,20 @@ impl RawFixture {
         let client = sandbox.client();
         let raw = RawClient::open(&sandbox);
         RawFixture { raw, client, daemon, sandbox }
+    }
+
+    /// Creates map `id` ([`create_test_map`]) with `deltas` applied (at version 0, as
+    /// one batch of one delta each); returns its bounds and the map as the daemon
+    /// holds it, what bad requests must leave unchanged.
+    pub fn test_map_with(
+        &mut self,
+        id: u64,
+        deltas: &[dyfos_shared::world::MapDelta],
+    ) -> (dyfos_shared::world::Bounds, dyfos_shared::world::World) {
+        let bounds = create_test_map(&mut self.client, id);
+        let version = self.client.apply(id, Some(0), deltas, PATIENCE).expect("apply the deltas");
+        assert_eq!(version, deltas.len() as u64);
+        (bounds, self.client.snapshot(id, PATIENCE).expect("snapshot"))
     }
 }
 

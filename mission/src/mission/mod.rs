@@ -48,6 +48,7 @@
 //! assert!(Mission::from_json(r#"{"waypoints": []}"#).is_err());
 //! ```
 
+pub mod failure;
 pub mod log;
 pub mod output;
 pub mod presence;

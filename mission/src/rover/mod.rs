@@ -49,12 +49,13 @@
 pub mod controller;
 pub mod ekf;
 
-use crate::eval::{McapMission, McapWriteError};
+use crate::eval::McapMission;
 use crate::mission::Mission;
+use crate::mission::failure::RunError;
 use crate::mission::log::EventLog;
 use crate::mission::output::OutputConfig;
 use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
-use crate::mission::topics::{Inbox, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
+use crate::mission::topics::{Inbox, Outbox, TopicSendError, Topics, TopicsConfig};
 use crate::sim::{SimClock, TrueRover, standard_normal, stream_seed, streams};
 use controller::{DriveConfig, plan_leg};
 use dyfos_shared::posterior::Belief;
@@ -129,17 +130,11 @@ impl RoverConfig {
 pub const LINGER: Duration = Duration::from_secs(20);
 
 /// Why the rover could not run its mission.
+pub type RoverRunError = RunError<RoverFailure>;
+
+/// What only the rover fails at.
 #[derive(Debug, thiserror::Error)]
-pub enum RoverRunError {
-    /// A topic could not be opened.
-    #[error(transparent)]
-    Open(#[from] TopicOpenError),
-    /// A message could not be sent.
-    #[error(transparent)]
-    Send(#[from] TopicSendError),
-    /// The event log could not be created.
-    #[error("cannot create the event log: {0}")]
-    Log(#[from] std::io::Error),
+pub enum RoverFailure {
     /// No viewer's heartbeat arrived in time.
     #[error(
         "no viewer's heartbeat on `{topic}` after {waited:?}; start `dyfos-viewer` with the same --prefix and --mission-name (and, across hosts, `dyfos-link` on both), or pass --dead-reckoning"
@@ -156,9 +151,12 @@ pub enum RoverRunError {
         /// The step the rover was on.
         step: u32,
     },
-    /// The mission's MCAP file could not be written.
-    #[error(transparent)]
-    Mcap(#[from] McapWriteError),
+}
+
+impl From<RoverFailure> for RoverRunError {
+    fn from(failure: RoverFailure) -> Self {
+        RunError::Side(failure)
+    }
 }
 
 /// What the mission came to, as the rover knows it.
@@ -406,13 +404,14 @@ fn drive(
                 break;
             }
             if stop() {
-                return Err(RoverRunError::Stopped { step: 0 });
+                return Err(RoverFailure::Stopped { step: 0 }.into());
             }
             if waited.elapsed() > config.viewer_timeout {
-                return Err(RoverRunError::NoViewer {
+                return Err(RoverFailure::NoViewer {
                     topic: topic_name(&config.topics, VIEWER_PRESENCE_TOPIC),
                     waited: config.viewer_timeout,
-                });
+                }
+                .into());
             }
             run.ports.viewer.wait(Duration::from_millis(10));
         }
@@ -465,7 +464,7 @@ fn drive(
             run.ekf.predict(m, &mission.odometry);
             run.sim_time += dt;
             if !run.clock.advance_to(run.sim_time, stop) {
-                return Err(RoverRunError::Stopped { step });
+                return Err(RoverFailure::Stopped { step }.into());
             }
             if (k + 1) % config.sample_every.max(1) as usize == 0 && k + 1 < plan.len() {
                 run.publish(step, Phase::Driving, false)?;
@@ -481,7 +480,7 @@ fn drive(
             run.await_measurement(step, stop)
         };
         if stop() {
-            return Err(RoverRunError::Stopped { step });
+            return Err(RoverFailure::Stopped { step }.into());
         }
         run.clock.catch_up();
         run.sim_time = run.sim_time.max(run.clock.now());

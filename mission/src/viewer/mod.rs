@@ -42,12 +42,13 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use crate::eval::{AnswerRecord, McapMission, McapWriteError};
+use crate::eval::{AnswerRecord, McapMission};
 use crate::mission::Mission;
+use crate::mission::failure::RunError;
 use crate::mission::log::EventLog;
 use crate::mission::output::OutputConfig;
 use crate::mission::presence::{Heartbeat, Peer, PresenceChange, Reliable, acknowledge, drain_acks};
-use crate::mission::topics::{Inbox, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
+use crate::mission::topics::{Inbox, Outbox, TopicSendError, Topics, TopicsConfig};
 use crate::rover::{MISSION, SIM};
 use crate::sim::{CameraView, Flight, FlightLimits, SimCamera, SimClock, stream_seed, streams};
 use dyfos_client::{
@@ -134,26 +135,20 @@ impl ViewerConfig {
 }
 
 /// Why the viewer could not run.
+pub type ViewerRunError = RunError<ViewerFailure>;
+
+/// What only the viewer fails at.
 #[derive(Debug, thiserror::Error)]
-pub enum ViewerRunError {
+pub enum ViewerFailure {
     /// The daemon cannot be reached.
     #[error(transparent)]
-    Connect(#[from] ClientOpenError),
+    Connect(ClientOpenError),
     /// The map could not be uploaded.
     #[error("cannot upload the mission's map to dyfosd: {0}")]
-    Map(#[from] MapRequestError),
+    Map(MapRequestError),
     /// The mission's noise model cannot run here.
     #[error(transparent)]
-    Model(#[from] NoiseModelError),
-    /// A topic could not be opened.
-    #[error(transparent)]
-    Open(#[from] TopicOpenError),
-    /// A message could not be sent.
-    #[error(transparent)]
-    Send(#[from] TopicSendError),
-    /// The event log could not be created.
-    #[error("cannot create the event log: {0}")]
-    Log(#[from] std::io::Error),
+    Model(NoiseModelError),
     /// No rover spoke for `idle_timeout`.
     #[error(
         "no word from a rover on `{topic}` for {waited:?}; start `dyfos-rover` with the same --prefix and --mission-name"
@@ -175,9 +170,12 @@ pub enum ViewerRunError {
     /// SIGINT or SIGTERM arrived.
     #[error("stopped by a signal")]
     Stopped,
-    /// The mission's MCAP file could not be written.
-    #[error(transparent)]
-    Mcap(#[from] McapWriteError),
+}
+
+impl From<ViewerFailure> for ViewerRunError {
+    fn from(failure: ViewerFailure) -> Self {
+        RunError::Side(failure)
+    }
 }
 
 /// What the viewer did.
@@ -398,8 +396,9 @@ fn serve(
     mcap: &mut Option<McapMission>,
 ) -> Result<ViewerReport, ViewerRunError> {
     let mission = &config.mission;
-    let model = NoiseModel::from_params_and_weights(&mission.params, config.learned.as_ref())?;
-    let client = Client::connect(&config.client)?;
+    let model =
+        NoiseModel::from_params_and_weights(&mission.params, config.learned.as_ref()).map_err(ViewerFailure::Model)?;
+    let client = Client::connect(&config.client).map_err(ViewerFailure::Connect)?;
     let topics = Topics::open(&config.topics)?;
     let truth = topics.inbox::<TrueStateMsg>(SIM, TRUTH_TOPIC, 64)?;
     let measurement: Outbox<MeasurementMsg> = topics.outbox(MISSION, MEASUREMENT_TOPIC)?;
@@ -427,7 +426,7 @@ fn serve(
         pending: None,
         messages_sent: 0,
     };
-    v.sync_map()?;
+    v.sync_map().map_err(ViewerFailure::Map)?;
     // The heartbeat is what tells the rover a viewer is ready, so it comes last.
     let rendezvous = v.topics.inbox::<RendezvousStateMsg>(MISSION, RENDEZVOUS_TOPIC, 64)?;
     v.heartbeat = Some(Heartbeat::start(&config.topics, VIEWER_PRESENCE_TOPIC)?);
@@ -439,19 +438,21 @@ fn serve(
     let mut last_step = 0;
     loop {
         if stop() {
-            return Err(ViewerRunError::Stopped);
+            return Err(ViewerFailure::Stopped.into());
         }
         v.service()?;
         let Some(msg) = rendezvous.recv_timeout(RESEND_INTERVAL, stop) else {
             if heard.elapsed() > config.idle_timeout && !v.rover.present() {
-                return Err(ViewerRunError::Idle { topic: rendezvous.name().to_string(), waited: config.idle_timeout });
+                return Err(
+                    ViewerFailure::Idle { topic: rendezvous.name().to_string(), waited: config.idle_timeout }.into()
+                );
             }
             // A rover that was here and stays silent (crashed, killed, out of
             // reach for good) will not finish.
             if let Some(silent) = v.rover.silent_for()
                 && silent > config.rover_timeout
             {
-                return Err(ViewerRunError::RoverGone { topic: rendezvous.name().to_string(), waited: silent });
+                return Err(ViewerFailure::RoverGone { topic: rendezvous.name().to_string(), waited: silent }.into());
             }
             continue;
         };
@@ -534,7 +535,7 @@ fn serve(
                     mcap.record_answer(record);
                 }
                 if !v.fly(target, stop) {
-                    return Err(ViewerRunError::Stopped);
+                    return Err(ViewerFailure::Stopped.into());
                 }
                 v.log.record("arrived", v.clock.now(), json!({"step": step}));
                 let pose = Some(ViewerPose { position: target.0, yaw: target.1 });

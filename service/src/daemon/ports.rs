@@ -133,31 +133,28 @@ impl Ports {
         // dropped unanswered (2 × `max_requests_per_client`); iceoryx2 would otherwise
         // preallocate for every response buffer and borrow slot as well (6× more).
         let responses = limits.max_clients * 2 * limits.max_requests_per_client + 1;
-        let rendezvous = rendezvous
-            .server_builder()
-            .max_loaned_responses_per_request(1)
-            .override_response_preallocation(move |_| responses)
-            .create()
-            .map_err(server)?;
+        // Each server with the service's own settings, then the daemon's one loan
+        // and `responses` per request.
+        macro_rules! server {
+            ($service:ident $(, $setting:ident($value:expr))*) => {
+                $service
+                    .server_builder()
+                    $(.$setting($value))*
+                    .max_loaned_responses_per_request(1)
+                    .override_response_preallocation(move |_| responses)
+                    .create()
+                    .map_err(server)?
+            };
+        }
+        let rendezvous = server!(rendezvous);
         // A fixed-size segment of snapshot-page-sized replies: iceoryx2 keeps the
         // bookkeeping of a resizable segment for all of its 255 possible segments per
         // connected client (8 MB of /dev/shm per client, written and swept by this
         // thread each time one connects or leaves, stalling every other client's
         // requests).
-        let map = map
-            .server_builder()
-            .initial_max_slice_len(SNAPSHOT_PAGE_RECORDS)
-            .allocation_strategy(AllocationStrategy::Static)
-            .max_loaned_responses_per_request(1)
-            .override_response_preallocation(move |_| responses)
-            .create()
-            .map_err(server)?;
-        let stats = stats
-            .server_builder()
-            .max_loaned_responses_per_request(1)
-            .override_response_preallocation(move |_| responses)
-            .create()
-            .map_err(server)?;
+        let map =
+            server!(map, initial_max_slice_len(SNAPSHOT_PAGE_RECORDS), allocation_strategy(AllocationStrategy::Static));
+        let stats = server!(stats);
         let wake = wake_service.listener_builder().create().map_err(|e| IpcError::new("wake listener", e))?;
         let reply = reply_service.notifier_builder().create().map_err(|e| IpcError::new("reply notifier", e))?;
         let waitset = WaitSetBuilder::new().create::<Ipc>().map_err(|e| IpcError::new("wait set", e))?;

@@ -60,18 +60,17 @@ pub fn load_model(path: &Path) -> Result<Arc<Learned>, ModelLoadError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dyfos_process::scratch::Scratch;
 
     #[test]
     fn missing_and_corrupt_files_are_clear_errors() {
-        let dir = std::env::temp_dir().join(format!("dyfos-load-model-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let missing = dir.join("missing.bin");
+        let dir = Scratch::new("load-model");
+        let missing = dir.0.join("missing.bin");
         let e = load_model(&missing).unwrap_err().to_string();
         assert!(e.contains("cannot read model file") && e.contains("missing.bin") && e.contains("dyfos train"), "{e}");
-        let json = dir.join("scenario.json");
+        let json = dir.0.join("scenario.json");
         std::fs::write(&json, b"{\"bounds\": [0, 0, 1, 1]}").unwrap();
         let e = load_model(&json).unwrap_err().to_string();
         assert!(e.contains("is not a dyfos model file"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -285,15 +285,12 @@ impl MapRequest {
     /// Decodes and checks a request's shape: operation, flags, chunk numbering,
     /// record count and records. Map content is validated when applied.
     pub fn decode(h: &MapRequestHeader, records: &[WireDelta]) -> Result<Self, Rejection> {
-        if records.len() > MAX_DELTAS_PER_MESSAGE {
-            return Err(Rejection::new(
-                Status::OverCapacity,
-                format!(
-                    "{} records exceed the limit of {MAX_DELTAS_PER_MESSAGE} per message; upload large maps in chunks",
-                    records.len()
-                ),
-            ));
-        }
+        Rejection::at_most(
+            records.len(),
+            MAX_DELTAS_PER_MESSAGE,
+            "records",
+            " per message; upload large maps in chunks",
+        )?;
         let no_records = |what: &str| {
             if records.is_empty() {
                 Ok(())

@@ -236,6 +236,19 @@ impl Rejection {
         Rejection { index: Some(index), ..Rejection::new(status, message) }
     }
 
+    /// `over_capacity` for `n` records of `what` over `limit`, as the daemon refuses
+    /// a message that carries too many and a client refuses to send one; `advice`
+    /// ends the message.
+    pub fn at_most(n: usize, limit: usize, what: &str, advice: &str) -> Result<(), Rejection> {
+        if n > limit {
+            return Err(Rejection::new(
+                Status::OverCapacity,
+                format!("{n} {what} exceed the limit of {limit}{advice}"),
+            ));
+        }
+        Ok(())
+    }
+
     /// The wire form of `index` (`u64::MAX` for none).
     pub fn wire_index(&self) -> u64 {
         self.index.unwrap_or(u64::MAX)

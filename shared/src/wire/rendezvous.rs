@@ -319,15 +319,12 @@ impl RendezvousRequest {
                 format!("deadline = {} µs exceeds the limit of {MAX_DEADLINE_MICROS} µs (one hour)", h.deadline_micros),
             ));
         }
-        if records.len() > MAX_INLINE_DELTAS {
-            return Err(Rejection::new(
-                Status::OverCapacity,
-                format!(
-                    "{} inline delta records exceed the limit of {MAX_INLINE_DELTAS}; send large changes to the map service first",
-                    records.len()
-                ),
-            ));
-        }
+        Rejection::at_most(
+            records.len(),
+            MAX_INLINE_DELTAS,
+            "inline delta records",
+            "; send large changes to the map service first",
+        )?;
         let deltas = decode_batch(records)?;
         let request = RendezvousRequest {
             map: h.map_id,
@@ -344,55 +341,76 @@ impl RendezvousRequest {
     }
 }
 
-/// The reply: a status and, on success, the whole answer.
-#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("dyfos::RendezvousReply")]
-#[repr(C)]
-pub struct RendezvousReply {
-    /// A [`Status`] code.
-    pub status: u32,
-    /// [`Algorithm::ALL`] index of the algorithm used.
-    pub algorithm: u32,
-    /// Why the search stopped: 0 finished, 1 max generations, 2 budget, 3 deadline,
-    /// 4 abandoned (never sent by `dyfosd`, which does not reply to a client that left).
-    pub stop: u32,
-    /// 0 solve, 1 check.
-    pub mode: u32,
-    /// The request's id.
-    pub request_id: u64,
-    /// On success, the map version searched (or checked), after the inline deltas.
-    /// On error, the version as the request left the map: after its inline deltas
-    /// when they were applied before the search failed (`no_feasible_pose`,
-    /// `deadline_exceeded`, `internal_error`), else the version the map had when
-    /// the request was refused (nothing changed); [`ANY_VERSION`] if no map has the id.
-    pub map_version: u64,
-    /// x = (ρ, ψ, φ, ψ_v).
-    pub x: [f64; 4],
-    /// E = ln det Σ⁺.
-    pub cost: f64,
-    /// p_s.
-    pub sensor_position: [f64; 3],
-    /// R_ws as a quaternion (x, y, z, w), w ≥ 0 (SPEC §3).
-    pub sensor_quaternion: [f64; 4],
-    /// p_v.
-    pub viewer_position: [f64; 3],
-    /// ψ_v.
-    pub viewer_yaw: f64,
-    /// R, rows.
-    pub r: [[f64; 2]; 2],
-    /// Σ⁺, rows.
-    pub posterior: [[f64; 3]; 3],
-    /// Evaluations: total, workspace, collision, occlusion.
-    pub evaluations: [u64; 4],
-    /// Search time, µs.
-    pub micros: u64,
-    /// Time from receipt to reply in the daemon, µs (queueing included).
-    pub daemon_micros: u64,
-    /// For delta errors, the failing delta's index, else `u64::MAX`.
-    pub error_index: u64,
-    /// What went wrong, for people.
-    pub detail: Detail,
+/// Calls macro `$callback` with the fields of a rendezvous reply that carry the
+/// answer as the wire has it (the map version, the numbers, the counts and the
+/// timings), written once here with their documentation, in wire order.
+///
+/// [`RendezvousReply`] is generated from it, and so is the daemon's recording of a
+/// reply, which keeps these fields as they are and spells the codes out.
+#[macro_export]
+macro_rules! reply_answer_fields {
+    ($callback:ident) => {
+        $callback! {
+            /// On success, the map version searched (or checked), after the inline deltas.
+            /// On error, the version as the request left the map: after its inline deltas
+            /// when they were applied before the search failed (`no_feasible_pose`,
+            /// `deadline_exceeded`, `internal_error`), else the version the map had when
+            /// the request was refused (nothing changed); `ANY_VERSION` if no map has the id.
+            map_version: u64,
+            /// x = (ρ, ψ, φ, ψ_v).
+            x: [f64; 4],
+            /// E = ln det Σ⁺.
+            cost: f64,
+            /// p_s.
+            sensor_position: [f64; 3],
+            /// R_ws as a quaternion (x, y, z, w), w ≥ 0 (SPEC §3).
+            sensor_quaternion: [f64; 4],
+            /// p_v.
+            viewer_position: [f64; 3],
+            /// ψ_v.
+            viewer_yaw: f64,
+            /// R, rows.
+            r: [[f64; 2]; 2],
+            /// Σ⁺, rows.
+            posterior: [[f64; 3]; 3],
+            /// Evaluations: total, workspace, collision, occlusion.
+            evaluations: [u64; 4],
+            /// Search time, µs.
+            micros: u64,
+            /// Time from receipt to reply in the daemon, µs (queueing included).
+            daemon_micros: u64,
+        }
+    };
 }
+
+macro_rules! rendezvous_reply {
+    ($($(#[doc = $doc:literal])* $name:ident: $ty:ty,)*) => {
+        /// The reply: a status and, on success, the whole answer.
+        #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+        #[type_name("dyfos::RendezvousReply")]
+        #[repr(C)]
+        pub struct RendezvousReply {
+            /// A [`Status`] code.
+            pub status: u32,
+            /// [`Algorithm::ALL`] index of the algorithm used.
+            pub algorithm: u32,
+            /// Why the search stopped: 0 finished, 1 max generations, 2 budget, 3 deadline,
+            /// 4 abandoned (never sent by `dyfosd`, which does not reply to a client that left).
+            pub stop: u32,
+            /// 0 solve, 1 check.
+            pub mode: u32,
+            /// The request's id.
+            pub request_id: u64,
+            $($(#[doc = $doc])* pub $name: $ty,)*
+            /// For delta errors, the failing delta's index, else `u64::MAX`.
+            pub error_index: u64,
+            /// What went wrong, for people.
+            pub detail: Detail,
+        }
+    };
+}
+
+crate::reply_answer_fields!(rendezvous_reply);
 
 /// The outcome of a check-mode request: everything validated, nothing searched.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -30,125 +30,105 @@ pub struct StatsRequest {
     pub reply_to: [u64; 2],
 }
 
-/// The daemon's health and counters; `Default` is all zeros.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("dyfos::StatsReply")]
-#[repr(C)]
-pub struct StatsReply {
-    /// The request's id.
-    pub request_id: u64,
-    /// The daemon's process id.
-    pub pid: u64,
-    /// Time since the daemon started, µs.
-    pub uptime_micros: u64,
-    /// Rendezvous queries answered with a pose.
-    pub queries_served: u64,
-    /// Requests of any service answered with an error.
-    pub requests_failed: u64,
-    /// Map requests answered with success.
-    pub map_requests: u64,
-    /// Maps held.
-    pub maps: u64,
-    /// Queries waiting for a worker.
-    pub queued: u64,
-    /// Queries being searched.
-    pub running: u64,
-    /// Worker threads.
-    pub workers: u64,
-    /// Query latency from receipt to reply over the last queries answered
-    /// (at most 4096), µs: median, 90th and 99th percentile, maximum.
-    pub latency_micros: [u64; 4],
-    /// Queries in that latency window.
-    pub latency_samples: u64,
-    /// Error replies by [`Status`] code.
-    pub errors_by_code: [u64; STATUS_SLOTS],
-    /// Queries abandoned because their client went away (killed, or dropped its
-    /// pending response) before the answer, mid-search or while they waited for a
-    /// worker; they got no reply.
-    /// Last, so the fields before keep their offsets.
-    pub queries_abandoned: u64,
-    /// Times a receive from the daemon's ports failed, e.g. `ExceedsMaxBorrows`
-    /// when a client keeps sending while its earlier requests still wait: the
-    /// requests stay where they are and are taken later.
-    pub receive_failures: u64,
-    /// Warnings and errors the daemon's log saw (written or not).
-    pub log_warnings: u64,
-    /// Of those, iceoryx2's own (e.g. one per notification while a dead client's
-    /// listener is still registered).
-    pub ipc_warnings: u64,
-    /// Log lines at `info` and above left out by the rate limit (the log says how
-    /// many after each 10 s window).
-    pub log_suppressed: u64,
-}
-
-/// [`StatsReply`] decoded.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct DaemonStats {
-    /// The daemon's process id.
-    pub pid: u64,
-    /// Time since the daemon started.
-    pub uptime: std::time::Duration,
-    /// Rendezvous queries answered with a pose.
-    pub queries_served: u64,
-    /// Queries abandoned because their client went away, mid-search or while they
-    /// waited for a worker (no reply).
-    pub queries_abandoned: u64,
-    /// Requests answered with an error.
-    pub requests_failed: u64,
-    /// Successful map requests.
-    pub map_requests: u64,
-    /// Maps held.
-    pub maps: u64,
-    /// Queries waiting for a worker.
-    pub queued: u64,
-    /// Queries being searched.
-    pub running: u64,
-    /// Worker threads.
-    pub workers: u64,
-    /// Latency median, p90, p99, max, µs (receipt to reply).
-    pub latency_micros: [u64; 4],
-    /// Queries in the latency window.
-    pub latency_samples: u64,
-    /// Non-zero error counts by code.
-    pub errors: Vec<(Status, u64)>,
-    /// Failed receives from the daemon's ports (a client sending past its limit).
-    pub receive_failures: u64,
-    /// Warnings and errors the daemon's log saw.
-    pub log_warnings: u64,
-    /// Of those, iceoryx2's own.
-    pub ipc_warnings: u64,
-    /// Log lines left out by the rate limit.
-    pub log_suppressed: u64,
-}
-
-impl From<&StatsReply> for DaemonStats {
-    fn from(r: &StatsReply) -> Self {
-        let errors = r
-            .errors_by_code
-            .iter()
-            .enumerate()
-            .filter(|(_, n)| **n > 0)
-            .filter_map(|(code, n)| Status::try_from(code as u32).ok().map(|s| (s, *n)))
-            .collect();
-        DaemonStats {
-            pid: r.pid,
-            uptime: std::time::Duration::from_micros(r.uptime_micros),
-            queries_served: r.queries_served,
-            queries_abandoned: r.queries_abandoned,
-            requests_failed: r.requests_failed,
-            map_requests: r.map_requests,
-            maps: r.maps,
-            queued: r.queued,
-            running: r.running,
-            workers: r.workers,
-            latency_micros: r.latency_micros,
-            latency_samples: r.latency_samples,
-            errors,
-            receive_failures: r.receive_failures,
-            log_warnings: r.log_warnings,
-            ipc_warnings: r.ipc_warnings,
-            log_suppressed: r.log_suppressed,
+/// The counters a stats reply carries as they are, in wire order: those before
+/// [`StatsReply::errors_by_code`], then those after it (added later, last so that
+/// the fields before keep their offsets). [`StatsReply`], [`DaemonStats`] and the
+/// decoding of one into the other are generated from this one list.
+macro_rules! stats_types {
+    (
+        { $($(#[doc = $doc:literal])* $name:ident: $ty:ty,)* }
+        { $($(#[doc = $later_doc:literal])* $later:ident: $later_ty:ty,)* }
+    ) => {
+        /// The daemon's health and counters; `Default` is all zeros.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+        #[type_name("dyfos::StatsReply")]
+        #[repr(C)]
+        pub struct StatsReply {
+            /// The request's id.
+            pub request_id: u64,
+            /// The daemon's process id.
+            pub pid: u64,
+            /// Time since the daemon started, µs.
+            pub uptime_micros: u64,
+            $($(#[doc = $doc])* pub $name: $ty,)*
+            /// Error replies by [`Status`] code.
+            pub errors_by_code: [u64; STATUS_SLOTS],
+            $($(#[doc = $later_doc])* pub $later: $later_ty,)*
         }
+
+        /// [`StatsReply`] decoded.
+        #[derive(Debug, Clone, PartialEq, Eq)]
+        pub struct DaemonStats {
+            /// The daemon's process id.
+            pub pid: u64,
+            /// Time since the daemon started.
+            pub uptime: std::time::Duration,
+            $($(#[doc = $doc])* pub $name: $ty,)*
+            /// Non-zero error counts by code.
+            pub errors: Vec<(Status, u64)>,
+            $($(#[doc = $later_doc])* pub $later: $later_ty,)*
+        }
+
+        impl From<&StatsReply> for DaemonStats {
+            fn from(r: &StatsReply) -> Self {
+                let errors = r
+                    .errors_by_code
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, n)| **n > 0)
+                    .filter_map(|(code, n)| Status::try_from(code as u32).ok().map(|s| (s, *n)))
+                    .collect();
+                DaemonStats {
+                    pid: r.pid,
+                    uptime: std::time::Duration::from_micros(r.uptime_micros),
+                    $($name: r.$name,)*
+                    errors,
+                    $($later: r.$later,)*
+                }
+            }
+        }
+    };
+}
+
+stats_types! {
+    {
+        /// Rendezvous queries answered with a pose.
+        queries_served: u64,
+        /// Requests of any service answered with an error.
+        requests_failed: u64,
+        /// Map requests answered with success.
+        map_requests: u64,
+        /// Maps held.
+        maps: u64,
+        /// Queries waiting for a worker.
+        queued: u64,
+        /// Queries being searched.
+        running: u64,
+        /// Worker threads.
+        workers: u64,
+        /// Query latency from receipt to reply over the last queries answered
+        /// (at most 4096), µs: median, 90th and 99th percentile, maximum.
+        latency_micros: [u64; 4],
+        /// Queries in that latency window.
+        latency_samples: u64,
+    }
+    {
+        /// Queries abandoned because their client went away (killed, or dropped its
+        /// pending response) before the answer, mid-search or while they waited for a
+        /// worker; they got no reply.
+        queries_abandoned: u64,
+        /// Times a receive from the daemon's ports failed, e.g. `ExceedsMaxBorrows`
+        /// when a client keeps sending while its earlier requests still wait: the
+        /// requests stay where they are and are taken later.
+        receive_failures: u64,
+        /// Warnings and errors the daemon's log saw (written or not).
+        log_warnings: u64,
+        /// Of those, iceoryx2's own (e.g. one per notification while a dead client's
+        /// listener is still registered).
+        ipc_warnings: u64,
+        /// Log lines at `info` and above left out by the rate limit (the log says how
+        /// many after each 10 s window).
+        log_suppressed: u64,
     }
 }
 

@@ -28,16 +28,15 @@ struct Fixture {
 impl Fixture {
     fn new(name: &str) -> Fixture {
         let mut io = RawFixture::new(name);
-        let client = &mut io.client;
-        let bounds = create_test_map(client, 1);
         let crate_ =
             Obstacle::Box(AxisBox { min: na::Point3::new(4.0, 4.0, 0.0), max: na::Point3::new(5.0, 6.0, 3.0) });
-        let deltas = [
-            MapDelta::UpsertObstacle { id: 1, obstacle: pole(2.0) },
-            MapDelta::UpsertObstacle { id: 2, obstacle: crate_ },
-        ];
-        assert_eq!(client.apply(1, Some(0), &deltas, PATIENCE).unwrap(), 2);
-        let before = client.snapshot(1, PATIENCE).unwrap();
+        let (bounds, before) = io.test_map_with(
+            1,
+            &[
+                MapDelta::UpsertObstacle { id: 1, obstacle: pole(2.0) },
+                MapDelta::UpsertObstacle { id: 2, obstacle: crate_ },
+            ],
+        );
         Fixture { io, bounds, before }
     }
 

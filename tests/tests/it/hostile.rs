@@ -14,9 +14,7 @@ use dyfos_shared::wire::map::{MapRequest, MapRequestHeader, WireDelta, encode_de
 use dyfos_shared::wire::rendezvous::{Mode, RendezvousReply, RendezvousRequestHeader, WireParams};
 use dyfos_shared::wire::{ANY_VERSION, Rejection};
 use dyfos_shared::world::{AxisBox, VerticalCylinder};
-use dyfos_tests::{
-    PATIENCE, RawClient, RawFixture, Sandbox, bin, create_test_map, data, param_floats_mut, scenario, without_micros,
-};
+use dyfos_tests::{PATIENCE, RawClient, RawFixture, Sandbox, bin, data, param_floats_mut, scenario, without_micros};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
@@ -217,12 +215,9 @@ struct Hostile {
 impl Hostile {
     fn new(name: &str) -> Hostile {
         let mut io = RawFixture::new(name);
-        let client = &mut io.client;
         let example = scenario("example.json");
-        client.upload_map(1, &example.world, false, PATIENCE).unwrap();
-        let bounds = create_test_map(client, 2);
-        client.apply(2, Some(0), &[pole(1, 2.0), pole(2, -3.0)], PATIENCE).unwrap();
-        let model = client.snapshot(2, PATIENCE).unwrap();
+        io.client.upload_map(1, &example.world, false, PATIENCE).unwrap();
+        let (bounds, model) = io.test_map_with(2, &[pole(1, 2.0), pole(2, -3.0)]);
         let good = WellFormed::start(&io.sandbox, 1, example.clone());
         let belief = Belief::new([0.0, 0.0, 0.3], [[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap();
         let valid =

@@ -9,12 +9,13 @@
 
 use dyfos_mission::eval::foxglove::CHANNELS;
 use dyfos_mission::eval::{MissionTrace, ros2};
+use dyfos_mission::mission::Mission;
 use dyfos_shared::wire::mission::Observation;
 use dyfos_tests::Sandbox;
-use dyfos_tests::mission::{MissionFiles, small_mission, steps_of};
+use dyfos_tests::mission::{MissionFiles, Robot, small_mission, steps_of};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// One message read back: log time and JSON.
 struct Read {
@@ -190,82 +191,108 @@ fn rover_poses_match(topics: &BTreeMap<String, Vec<Read>>, trace: &MissionTrace)
     assert_eq!(rover_tf, truth.len());
 }
 
-#[test]
-fn rover_and_viewer_write_missions_that_match_their_event_logs() {
-    let (sandbox, _daemon) = Sandbox::with_daemon("mission-mcap");
+/// The small mission run once with each side writing its MCAP file.
+struct McapRun<'a> {
+    mission: &'a Mission,
+    rover_file: PathBuf,
+    viewer_file: PathBuf,
+    rover: Robot,
+    viewer: Robot,
+    trace: MissionTrace,
+}
+
+/// Runs the small mission with `--mcap FILE` and then `extra` on both sides, and
+/// hands the run to `check` while its files exist.
+fn with_mcap_mission(name: &str, extra: &[&str], check: impl FnOnce(McapRun)) {
+    let (sandbox, _daemon) = Sandbox::with_daemon(name);
     let mission = small_mission();
     let files = MissionFiles::new(&sandbox, &mission);
     let (rover_file, viewer_file) = files.mcap_files();
-    let (rover, viewer, trace) =
-        files.run("m", 7, &["--mcap", viewer_file.to_str().unwrap()], &["--mcap", rover_file.to_str().unwrap()]);
-    let n = mission.waypoints.len();
+    let rover_args = [&["--mcap", rover_file.to_str().unwrap()][..], extra].concat();
+    let viewer_args = [&["--mcap", viewer_file.to_str().unwrap()][..], extra].concat();
+    let (rover, viewer, trace) = files.run("m", 7, &viewer_args, &rover_args);
+    check(McapRun { mission: &mission, rover_file, viewer_file, rover, viewer, trace });
+}
 
-    // The rover's file: its own poses, its requests, the measurements it used.
-    let topics = read_mission(&rover_file);
-    rover_poses_match(&topics, &trace);
-    let rover_events = rover.events();
-    let sent = steps_of(&rover_events, "rendezvous_sent");
-    let requests = &topics["/dyfos/rendezvous/request"];
-    assert_eq!(requests.len(), n);
-    for (r, (k, e)) in requests.iter().zip(&sent) {
-        assert_eq!(r.data["step"], json!(k));
-        assert_eq!((&r.data["mean"], &r.data["cov"]), (&e["mean"], &e["cov"]), "step {k}");
-        assert_eq!(r.log_time, ns(e["sim_time"].as_f64().unwrap()));
-    }
-    let measurements = &topics["/dyfos/rendezvous/measurement"];
-    let updated = steps_of(&rover_events, "updated");
-    assert_eq!(measurements.len(), n);
-    assert_eq!(updated.len(), n, "every rendezvous measured: {rover_events:?}");
-    for (m, (k, e)) in measurements.iter().zip(&updated) {
-        assert_eq!((&m.data["step"], m.data["status"].as_str()), (&json!(k), Some("observed")));
-        assert_eq!((&m.data["position"], &m.data["R"]), (&e["z"], &e["R"]), "step {k}");
-    }
-    assert!(topics["/dyfos/rendezvous/answer"].is_empty(), "the rover never sees the daemon's answers");
-    assert_eq!(topics["/map"].len(), 1, "the map once (the sun stands still)");
-    let map = &topics["/map"][0].data["entities"];
-    let cylinders = map.as_array().unwrap().iter().filter(|e| !e["cylinders"].as_array().unwrap().is_empty()).count();
-    assert_eq!(cylinders, mission.world.obstacles().len());
+#[test]
+fn rover_and_viewer_write_missions_that_match_their_event_logs() {
+    with_mcap_mission("mission-mcap", &[], |McapRun { mission, rover_file, viewer_file, rover, viewer, trace }| {
+        let n = mission.waypoints.len();
 
-    // The viewer's file: the beliefs it got, the daemon's answers, where it looked from.
-    let topics = read_mission(&viewer_file);
-    let viewer_events = viewer.events();
-    let received = steps_of(&viewer_events, "rendezvous_received");
-    let requests = &topics["/dyfos/rendezvous/request"];
-    assert_eq!(requests.len(), n);
-    for (r, (k, e)) in requests.iter().zip(&received) {
-        assert_eq!((&r.data["step"], &r.data["mean"], &r.data["cov"]), (&json!(k), &e["mean"], &e["cov"]));
-    }
-    let answers = &topics["/dyfos/rendezvous/answer"];
-    let logged = steps_of(&viewer_events, "answer");
-    assert_eq!(answers.len(), n);
-    for (a, (k, e)) in answers.iter().zip(&logged) {
-        let a = &a.data;
-        assert_eq!(a["step"], json!(k));
-        assert_eq!((&a["E"], &a["R"], &a["viewer_position"]), (&e["cost"], &e["R"], &e["viewer_position"]), "step {k}");
-        assert_eq!((&a["evaluations"]["total"], &a["map_version"]), (&e["evaluations"], &e["map_version"]));
-        assert_eq!((&a["algorithm"], a["sigma_plus"].as_array().map(Vec::len)), (&json!("dyfos"), Some(3)));
-    }
-    let poses = &topics["/viewer/pose"];
-    assert_eq!(poses.len(), n + 1, "take-off and each rendezvous");
-    for (p, (_, e)) in poses[1..].iter().zip(&logged) {
-        let position = &p.data["pose"]["position"];
-        assert_eq!(json!([position["x"], position["y"], position["z"]]), e["viewer_position"]);
-        assert!(same_angle(yaw(&p.data["pose"]["orientation"]), e["viewer_yaw"].as_f64().unwrap()));
-    }
-    let cameras = &topics["/viewer/camera"];
-    assert_eq!(cameras.len(), n);
-    for c in cameras {
-        let ids: Vec<&str> = c.data["entities"].as_array().unwrap().iter().map(|e| e["id"].as_str().unwrap()).collect();
-        assert_eq!(ids, ["frustum", "line_of_sight"]);
-        assert_eq!(c.data["entities"][0]["frame_id"], "camera");
-    }
-    // Its measurements are those the rover got (same numbers, through the topic).
-    let theirs: Vec<&Value> = measurements.iter().map(|m| &m.data).collect();
-    let ours: Vec<&Value> = topics["/dyfos/rendezvous/measurement"].iter().map(|m| &m.data).collect();
-    assert_eq!(ours, theirs);
-    let observed = trace.measurements.iter().filter(|m| matches!(m.observation, Observation::Observed { .. })).count();
-    assert_eq!(observed, n);
-    assert!(topics["/rover/pose"].is_empty(), "the viewer does not record the truth");
+        // The rover's file: its own poses, its requests, the measurements it used.
+        let topics = read_mission(&rover_file);
+        rover_poses_match(&topics, &trace);
+        let rover_events = rover.events();
+        let sent = steps_of(&rover_events, "rendezvous_sent");
+        let requests = &topics["/dyfos/rendezvous/request"];
+        assert_eq!(requests.len(), n);
+        for (r, (k, e)) in requests.iter().zip(&sent) {
+            assert_eq!(r.data["step"], json!(k));
+            assert_eq!((&r.data["mean"], &r.data["cov"]), (&e["mean"], &e["cov"]), "step {k}");
+            assert_eq!(r.log_time, ns(e["sim_time"].as_f64().unwrap()));
+        }
+        let measurements = &topics["/dyfos/rendezvous/measurement"];
+        let updated = steps_of(&rover_events, "updated");
+        assert_eq!(measurements.len(), n);
+        assert_eq!(updated.len(), n, "every rendezvous measured: {rover_events:?}");
+        for (m, (k, e)) in measurements.iter().zip(&updated) {
+            assert_eq!((&m.data["step"], m.data["status"].as_str()), (&json!(k), Some("observed")));
+            assert_eq!((&m.data["position"], &m.data["R"]), (&e["z"], &e["R"]), "step {k}");
+        }
+        assert!(topics["/dyfos/rendezvous/answer"].is_empty(), "the rover never sees the daemon's answers");
+        assert_eq!(topics["/map"].len(), 1, "the map once (the sun stands still)");
+        let map = &topics["/map"][0].data["entities"];
+        let cylinders =
+            map.as_array().unwrap().iter().filter(|e| !e["cylinders"].as_array().unwrap().is_empty()).count();
+        assert_eq!(cylinders, mission.world.obstacles().len());
+
+        // The viewer's file: the beliefs it got, the daemon's answers, where it looked from.
+        let topics = read_mission(&viewer_file);
+        let viewer_events = viewer.events();
+        let received = steps_of(&viewer_events, "rendezvous_received");
+        let requests = &topics["/dyfos/rendezvous/request"];
+        assert_eq!(requests.len(), n);
+        for (r, (k, e)) in requests.iter().zip(&received) {
+            assert_eq!((&r.data["step"], &r.data["mean"], &r.data["cov"]), (&json!(k), &e["mean"], &e["cov"]));
+        }
+        let answers = &topics["/dyfos/rendezvous/answer"];
+        let logged = steps_of(&viewer_events, "answer");
+        assert_eq!(answers.len(), n);
+        for (a, (k, e)) in answers.iter().zip(&logged) {
+            let a = &a.data;
+            assert_eq!(a["step"], json!(k));
+            assert_eq!(
+                (&a["E"], &a["R"], &a["viewer_position"]),
+                (&e["cost"], &e["R"], &e["viewer_position"]),
+                "step {k}"
+            );
+            assert_eq!((&a["evaluations"]["total"], &a["map_version"]), (&e["evaluations"], &e["map_version"]));
+            assert_eq!((&a["algorithm"], a["sigma_plus"].as_array().map(Vec::len)), (&json!("dyfos"), Some(3)));
+        }
+        let poses = &topics["/viewer/pose"];
+        assert_eq!(poses.len(), n + 1, "take-off and each rendezvous");
+        for (p, (_, e)) in poses[1..].iter().zip(&logged) {
+            let position = &p.data["pose"]["position"];
+            assert_eq!(json!([position["x"], position["y"], position["z"]]), e["viewer_position"]);
+            assert!(same_angle(yaw(&p.data["pose"]["orientation"]), e["viewer_yaw"].as_f64().unwrap()));
+        }
+        let cameras = &topics["/viewer/camera"];
+        assert_eq!(cameras.len(), n);
+        for c in cameras {
+            let ids: Vec<&str> =
+                c.data["entities"].as_array().unwrap().iter().map(|e| e["id"].as_str().unwrap()).collect();
+            assert_eq!(ids, ["frustum", "line_of_sight"]);
+            assert_eq!(c.data["entities"][0]["frame_id"], "camera");
+        }
+        // Its measurements are those the rover got (same numbers, through the topic).
+        let theirs: Vec<&Value> = measurements.iter().map(|m| &m.data).collect();
+        let ours: Vec<&Value> = topics["/dyfos/rendezvous/measurement"].iter().map(|m| &m.data).collect();
+        assert_eq!(ours, theirs);
+        let observed =
+            trace.measurements.iter().filter(|m| matches!(m.observation, Observation::Observed { .. })).count();
+        assert_eq!(observed, n);
+        assert!(topics["/rover/pose"].is_empty(), "the viewer does not record the truth");
+    });
 }
 
 /// Reads a ROS 2-profile file: checks the summary (profile `ros2`, CDR messages,
@@ -304,43 +331,43 @@ fn read_ros2(path: &Path) -> BTreeMap<String, Vec<u64>> {
 
 #[test]
 fn rover_and_viewer_write_ros2_bags_on_request() {
-    let (sandbox, _daemon) = Sandbox::with_daemon("mission-ros2");
-    let mission = small_mission();
-    let files = MissionFiles::new(&sandbox, &mission);
-    let (rover_file, viewer_file) = files.mcap_files();
-    let ros2 = |file: &Path| ["--mcap".to_string(), file.display().to_string(), "--mcap-profile".into(), "ros2".into()];
-    let (rover_args, viewer_args) = (ros2(&rover_file), ros2(&viewer_file));
-    let (rover, viewer, trace) =
-        files.run("m", 7, &viewer_args.each_ref().map(String::as_str), &rover_args.each_ref().map(String::as_str));
-    let n = mission.waypoints.len();
+    with_mcap_mission(
+        "mission-ros2",
+        &["--mcap-profile", "ros2"],
+        |McapRun { mission, rover_file, viewer_file, rover, viewer, trace }| {
+            let n = mission.waypoints.len();
 
-    let topics = read_ros2(&rover_file);
-    let mut truth: Vec<u64> = trace.truth.iter().map(|t| ns(t.sim_time)).collect();
-    truth.sort();
-    assert_eq!(topics["/rover/pose"], truth);
-    assert_eq!(topics["/rover/estimate/pose"].len(), trace.estimates.len());
-    assert_eq!(topics["/dyfos/ape"].len(), trace.errors().len());
-    let rover_events = rover.events();
-    let sent = steps_of(&rover_events, "rendezvous_sent");
-    let times: Vec<u64> = sent.iter().map(|(_, e)| ns(e["sim_time"].as_f64().unwrap())).collect();
-    assert_eq!(topics["/dyfos/rendezvous/request"], times);
-    assert_eq!(topics["/dyfos/rendezvous/measurement"].len(), n);
-    assert!(topics["/dyfos/rendezvous/answer"].is_empty());
-    // `dyfos ape` reads the error from the ROS 2 profile's CDR as from the trace.
-    let out = std::process::Command::new(dyfos_tests::bin("dyfos")).arg("ape").arg(&rover_file).output().unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
-    let rmse = stdout.lines().find(|l| l.starts_with("RMSE")).unwrap_or_else(|| panic!("no RMSE row:\n{stdout}"));
-    let expected = format!("{:.1}", trace.ape().expect("samples").centimetres()[0]);
-    assert_eq!(rmse.split_whitespace().nth(1), Some(expected.as_str()), "{stdout}");
+            let topics = read_ros2(&rover_file);
+            let mut truth: Vec<u64> = trace.truth.iter().map(|t| ns(t.sim_time)).collect();
+            truth.sort();
+            assert_eq!(topics["/rover/pose"], truth);
+            assert_eq!(topics["/rover/estimate/pose"].len(), trace.estimates.len());
+            assert_eq!(topics["/dyfos/ape"].len(), trace.errors().len());
+            let rover_events = rover.events();
+            let sent = steps_of(&rover_events, "rendezvous_sent");
+            let times: Vec<u64> = sent.iter().map(|(_, e)| ns(e["sim_time"].as_f64().unwrap())).collect();
+            assert_eq!(topics["/dyfos/rendezvous/request"], times);
+            assert_eq!(topics["/dyfos/rendezvous/measurement"].len(), n);
+            assert!(topics["/dyfos/rendezvous/answer"].is_empty());
+            // `dyfos ape` reads the error from the ROS 2 profile's CDR as from the trace.
+            let out =
+                std::process::Command::new(dyfos_tests::bin("dyfos")).arg("ape").arg(&rover_file).output().unwrap();
+            let stdout = String::from_utf8_lossy(&out.stdout);
+            assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+            let rmse =
+                stdout.lines().find(|l| l.starts_with("RMSE")).unwrap_or_else(|| panic!("no RMSE row:\n{stdout}"));
+            let expected = format!("{:.1}", trace.ape().expect("samples").centimetres()[0]);
+            assert_eq!(rmse.split_whitespace().nth(1), Some(expected.as_str()), "{stdout}");
 
-    let topics = read_ros2(&viewer_file);
-    let events = viewer.events();
-    assert_eq!(topics["/dyfos/rendezvous/request"].len(), steps_of(&events, "rendezvous_received").len());
-    assert_eq!(topics["/dyfos/rendezvous/answer"].len(), n);
-    assert_eq!(topics["/viewer/pose"].len(), n + 1, "take-off and each rendezvous");
-    assert_eq!(topics["/viewer/camera"].len(), n);
-    assert!(topics["/rover/pose"].is_empty(), "the viewer does not record the truth");
+            let topics = read_ros2(&viewer_file);
+            let events = viewer.events();
+            assert_eq!(topics["/dyfos/rendezvous/request"].len(), steps_of(&events, "rendezvous_received").len());
+            assert_eq!(topics["/dyfos/rendezvous/answer"].len(), n);
+            assert_eq!(topics["/viewer/pose"].len(), n + 1, "take-off and each rendezvous");
+            assert_eq!(topics["/viewer/camera"].len(), n);
+            assert!(topics["/rover/pose"].is_empty(), "the viewer does not record the truth");
+        },
+    );
 }
 
 #[test]

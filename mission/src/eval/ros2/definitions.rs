@@ -161,49 +161,49 @@ pub fn full_text(root: &str) -> Result<String, String> {
 mod tests {
     use super::*;
 
-    fn section(name: &str) -> String {
-        format!("\n{}{}", delimiter(name), msg(name).unwrap())
-    }
-
+    /// A root type's text: its own definition, then each type it uses, depth first
+    /// in sorted field order and once each, after a rosbag2 separator.
     #[test]
-    fn a_pose_stamped_is_followed_by_its_types_depth_first_in_sorted_order() {
-        let expected = [
-            msg("geometry_msgs/PoseStamped").unwrap().to_string(),
-            section("geometry_msgs/Pose"),
-            section("geometry_msgs/Point"),
-            section("geometry_msgs/Quaternion"),
-            section("std_msgs/Header"),
-            section("builtin_interfaces/Time"),
-        ]
-        .concat();
-        let text = full_text("geometry_msgs/msg/PoseStamped").unwrap();
-        assert_eq!(text, expected);
+    fn a_root_is_followed_by_its_types_depth_first_once_each() {
+        let cases: [(&str, &[&str]); 2] = [
+            (
+                "geometry_msgs/PoseStamped",
+                &[
+                    "geometry_msgs/Pose",
+                    "geometry_msgs/Point",
+                    "geometry_msgs/Quaternion",
+                    "std_msgs/Header",
+                    "builtin_interfaces/Time",
+                ],
+            ),
+            // Marker uses Header directly and through CompressedImage, which comes first.
+            (
+                "visualization_msgs/MarkerArray",
+                &[
+                    "visualization_msgs/Marker",
+                    "builtin_interfaces/Duration",
+                    "geometry_msgs/Point",
+                    "geometry_msgs/Pose",
+                    "geometry_msgs/Quaternion",
+                    "geometry_msgs/Vector3",
+                    "sensor_msgs/CompressedImage",
+                    "std_msgs/Header",
+                    "builtin_interfaces/Time",
+                    "std_msgs/ColorRGBA",
+                    "visualization_msgs/MeshFile",
+                    "visualization_msgs/UVCoordinate",
+                ],
+            ),
+        ];
+        for (root, uses) in cases {
+            let sections = uses.iter().map(|name| format!("\n{}{}", delimiter(name), msg(name).unwrap()));
+            let expected: String = std::iter::once(msg(root).unwrap().to_string()).chain(sections).collect();
+            assert_eq!(full_text(&root.replacen('/', "/msg/", 1)).unwrap(), expected, "{root}");
+        }
         // The shape of a rosbag2 file: a blank line before each separator.
-        assert!(text.contains(
+        assert!(full_text("geometry_msgs/msg/PoseStamped").unwrap().contains(
             "Pose pose\n\n================================================================================\nMSG: geometry_msgs/Pose\n# A representation"
         ));
-    }
-
-    #[test]
-    fn each_type_appears_once_where_it_is_first_used() {
-        // Marker uses Header directly and through CompressedImage, which comes first.
-        let expected = [
-            msg("visualization_msgs/MarkerArray").unwrap().to_string(),
-            section("visualization_msgs/Marker"),
-            section("builtin_interfaces/Duration"),
-            section("geometry_msgs/Point"),
-            section("geometry_msgs/Pose"),
-            section("geometry_msgs/Quaternion"),
-            section("geometry_msgs/Vector3"),
-            section("sensor_msgs/CompressedImage"),
-            section("std_msgs/Header"),
-            section("builtin_interfaces/Time"),
-            section("std_msgs/ColorRGBA"),
-            section("visualization_msgs/MeshFile"),
-            section("visualization_msgs/UVCoordinate"),
-        ]
-        .concat();
-        assert_eq!(full_text("visualization_msgs/msg/MarkerArray").unwrap(), expected);
     }
 
     #[test]

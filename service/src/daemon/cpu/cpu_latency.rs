@@ -125,12 +125,12 @@ impl CpuLatency {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dyfos_process::scratch::Scratch;
 
     /// An empty file standing in for the device, in a directory of its own.
-    fn fake_device(test: &str) -> (std::path::PathBuf, std::path::PathBuf) {
-        let dir = std::env::temp_dir().join(format!("dyfos-cpu-latency-{test}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let dev = dir.join("cpu_dma_latency");
+    fn fake_device(test: &str) -> (Scratch, std::path::PathBuf) {
+        let dir = Scratch::new(&format!("cpu-latency-{test}"));
+        let dev = dir.0.join("cpu_dma_latency");
         std::fs::write(&dev, b"").unwrap();
         (dir, dev)
     }
@@ -143,7 +143,7 @@ mod tests {
 
     #[test]
     fn the_request_is_held_once_and_released_after_a_quiet_time() {
-        let (dir, dev) = fake_device("held");
+        let (_dir, dev) = fake_device("held");
         let mut q = CpuLatency::open(Some(0), &dev);
         assert_eq!(written(&dev), [CpuLatency::NONE_US]);
         q.hold();
@@ -161,7 +161,6 @@ mod tests {
         // Traffic again: held again, at the target asked for.
         q.hold();
         assert_eq!(written(&dev), [CpuLatency::NONE_US, 0, CpuLatency::NONE_US, 0]);
-        std::fs::remove_dir_all(dir).unwrap();
     }
 
     #[test]
@@ -171,9 +170,8 @@ mod tests {
         off.hold();
         assert!(!off.is_held());
         assert!(written(&dev).is_empty());
-        let mut refused = CpuLatency::open(Some(0), &dir.join("missing").join("device"));
+        let mut refused = CpuLatency::open(Some(0), &dir.0.join("missing").join("device"));
         refused.hold();
         assert!(!refused.is_held());
-        std::fs::remove_dir_all(dir).unwrap();
     }
 }

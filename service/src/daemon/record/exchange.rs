@@ -94,69 +94,44 @@ impl RecordedRequest {
     }
 }
 
-/// A rendezvous reply as recorded (and as `dyfos replay` compares it).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RecordedReply {
-    /// The status name (`ok`, `no_feasible_pose`, …).
-    pub status: String,
-    /// The algorithm's name.
-    pub algorithm: String,
-    /// Why the search stopped.
-    pub stop: String,
-    /// The map version searched (or checked), after the inline deltas.
-    pub map_version: u64,
-    /// x = (ρ, ψ, φ, ψ_v).
-    pub x: [f64; 4],
-    /// E = ln det Σ⁺.
-    pub cost: f64,
-    /// p_s.
-    pub sensor_position: [f64; 3],
-    /// R_ws (x, y, z, w).
-    pub sensor_quaternion: [f64; 4],
-    /// p_v.
-    pub viewer_position: [f64; 3],
-    /// ψ_v.
-    pub viewer_yaw: f64,
-    /// R, rows.
-    pub r: [[f64; 2]; 2],
-    /// Σ⁺, rows.
-    pub posterior: [[f64; 3]; 3],
-    /// Evaluations: total, workspace, collision, occlusion.
-    pub evaluations: [u64; 4],
-    /// Search time, µs (not compared).
-    pub micros: u64,
-    /// Receipt to reply, µs (not compared).
-    pub daemon_micros: u64,
-    /// The failing delta's index, if any.
-    pub error_index: Option<u64>,
-    /// The detail text of an error.
-    pub message: String,
+macro_rules! recorded_reply {
+    ($($(#[doc = $doc:literal])* $name:ident: $ty:ty,)*) => {
+        /// A rendezvous reply as recorded (and as `dyfos replay` compares it): the
+        /// codes by name, the answer's fields as the wire carries them.
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        pub struct RecordedReply {
+            /// The status name (`ok`, `no_feasible_pose`, …).
+            pub status: String,
+            /// The algorithm's name.
+            pub algorithm: String,
+            /// Why the search stopped.
+            pub stop: String,
+            $($(#[doc = $doc])* pub $name: $ty,)*
+            /// The failing delta's index, if any.
+            pub error_index: Option<u64>,
+            /// The detail text of an error.
+            pub message: String,
+        }
+
+        impl RecordedReply {
+            /// The reply as sent.
+            pub fn of(r: &RendezvousReply) -> Self {
+                RecordedReply {
+                    status: Status::try_from(r.status).map_or_else(|_| format!("status_{}", r.status), |s| s.name().into()),
+                    algorithm: Algorithm::try_from(r.algorithm).map_or("?", Algorithm::name).to_string(),
+                    stop: StopReason::try_from(r.stop).map_or("?", StopReason::name).to_string(),
+                    $($name: r.$name,)*
+                    error_index: (r.error_index != u64::MAX).then_some(r.error_index),
+                    message: if r.status == Status::Ok as u32 { String::new() } else { r.detail.text() },
+                }
+            }
+        }
+    };
 }
 
-impl RecordedReply {
-    /// The reply as sent.
-    pub fn of(r: &RendezvousReply) -> Self {
-        RecordedReply {
-            status: Status::try_from(r.status).map_or_else(|_| format!("status_{}", r.status), |s| s.name().into()),
-            algorithm: Algorithm::try_from(r.algorithm).map_or("?", Algorithm::name).to_string(),
-            stop: StopReason::try_from(r.stop).map_or("?", StopReason::name).to_string(),
-            map_version: r.map_version,
-            x: r.x,
-            cost: r.cost,
-            sensor_position: r.sensor_position,
-            sensor_quaternion: r.sensor_quaternion,
-            viewer_position: r.viewer_position,
-            viewer_yaw: r.viewer_yaw,
-            r: r.r,
-            posterior: r.posterior,
-            evaluations: r.evaluations,
-            micros: r.micros,
-            daemon_micros: r.daemon_micros,
-            error_index: (r.error_index != u64::MAX).then_some(r.error_index),
-            message: if r.status == Status::Ok as u32 { String::new() } else { r.detail.text() },
-        }
-    }
+dyfos_shared::reply_answer_fields!(recorded_reply);
 
+impl RecordedReply {
     /// Every floating-point number of the reply.
     fn floats(&self) -> impl Iterator<Item = f64> + '_ {
         self.x

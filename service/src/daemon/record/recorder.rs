@@ -170,12 +170,12 @@ mod tests {
     use super::super::ChangeCause;
     use super::super::topics;
     use super::*;
+    use dyfos_process::scratch::Scratch;
 
     #[test]
     fn dropped_records_are_counted_and_recorded() {
-        let dir = std::env::temp_dir().join(format!("dyfos-record-drops-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let config = RecordConfig { queue: 1, ..RecordConfig::new(dir.join("drops.mcap")) };
+        let dir = Scratch::new("record-drops");
+        let config = RecordConfig { queue: 1, ..RecordConfig::new(dir.0.join("drops.mcap")) };
         // The writer is not draining yet: the queue holds one record, the rest drop.
         let (tx, rx) = std::sync::mpsc::sync_channel(config.queue);
         let dropped = Arc::new(AtomicU64::new(0));
@@ -211,6 +211,5 @@ mod tests {
         assert_eq!(by_topic[topics::MAP_CHANGE].len(), 1);
         assert_eq!(by_topic[topics::RECORDER].len(), 1);
         assert_eq!(by_topic[topics::RECORDER][0]["dropped_total"], 2);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -239,16 +239,18 @@ pub fn replay_file(path: &Path, options: &ReplayOptions, report: &mut dyn FnMut(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dyfos_process::scratch::Scratch;
 
-    fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("dyfos-replay-unit-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(name)
+    /// A scratch directory of its own, and `name` in it.
+    fn scratch(name: &str) -> (Scratch, PathBuf) {
+        let dir = Scratch::new(&format!("replay-unit-{name}"));
+        let path = dir.0.join(name);
+        (dir, path)
     }
 
     #[test]
     fn a_missing_file_is_a_read_error_naming_it() {
-        let path = scratch("missing.mcap");
+        let (_dir, path) = scratch("missing.mcap");
         let mut lines = Vec::new();
         let err = replay_file(&path, &ReplayOptions::default(), &mut |l| lines.push(l.to_string())).unwrap_err();
         assert!(matches!(err, ReplayError::Read { .. }), "{err:?}");
@@ -261,7 +263,7 @@ mod tests {
     /// exits 4), as the command always did.
     #[test]
     fn a_file_that_is_not_mcap_replays_nothing_and_is_incomplete() {
-        let path = scratch("not-mcap.mcap");
+        let (_dir, path) = scratch("not-mcap.mcap");
         std::fs::write(&path, b"{\"not\": \"mcap\"}").unwrap();
         let mut lines = Vec::new();
         let t = replay_file(&path, &ReplayOptions::default(), &mut |l| lines.push(l.to_string())).unwrap();
@@ -274,7 +276,7 @@ mod tests {
 
     #[test]
     fn an_empty_recording_replays_nothing_and_is_complete() {
-        let path = scratch("empty.mcap");
+        let (_dir, path) = scratch("empty.mcap");
         let mut writer = mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(&path).unwrap())).unwrap();
         writer.finish().unwrap();
         drop(writer);
