@@ -159,9 +159,17 @@ mod tests {
         Scenario::from_json(&json).unwrap()
     }
 
-    fn scenarios() -> [Scenario; 3] {
+    /// The example map with the sun near the zenith: glare from every pose, growing
+    /// with the range, so the lowest cost is at the nearest range, the least margin.
+    fn noon() -> Scenario {
+        let json = EXAMPLE.replace(r#""elevation": 0.7"#, r#""elevation": 1.5"#);
+        assert_ne!(json, EXAMPLE);
+        Scenario::from_json(&json).unwrap()
+    }
+
+    fn scenarios() -> [Scenario; 4] {
         let basin = include_str!("../../../tests/data/anisotropic-mirror-basin.json");
-        [Scenario::from_json(EXAMPLE).unwrap(), Scenario::from_json(basin).unwrap(), sunset()]
+        [Scenario::from_json(EXAMPLE).unwrap(), Scenario::from_json(basin).unwrap(), sunset(), noon()]
     }
 
     /// The default and the same search without its tie-break, on one scenario and seed.
