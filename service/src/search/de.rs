@@ -1,5 +1,5 @@
 //! `dyfos`: differential evolution with SciPy's `differential_evolution` semantics
-//! (SPEC §8), optionally followed by a local polish.
+//! (SPEC §8), optionally followed by a local polish and a tie-break.
 //!
 //! SciPy-faithful parts: parameters live in the unit cube and are scaled to the
 //! search space; population `max(5, popsize·dims)`; Latin-hypercube start; the
@@ -22,15 +22,16 @@
 //! member turned about the rover by each eighth of a yaw turn, then the lowest
 //! polished on, to steps of 1e-4 of the unit cube). It meets the gap goals to
 //! `brute` with ≈ 4 × fewer evaluations than SciPy's search followed by the mirrored
-//! polish ([`DifferentialEvolution::mirrored`], the default before it). Where the cost
-//! is flat (equal over a range of ρ, say) it settles on other poses than the
-//! mirrored polish did, some near the detection range's ends or the image's edges,
-//! where the true rover, off its belief, is lost; so last, of the poses within 1e-6
-//! of the lowest cost found, it moves to the one with the most margin to those
-//! limits ([`TieBreak`], `margin.rs`). (SPEC §8 names SciPy's defaults for `dyfos`
-//! and allows improvements "when a benchmark shows they find lower costs at little
-//! extra time"; the default reads the population size as one of the settings such
-//! an improvement may change, and a cost within 1e-6 as a tie. SciPy's search stays
+//! polish ([`DifferentialEvolution::mirrored`], the default before it). But where the
+//! cost is flat (equal over a range of ρ, say) the raced polish's jump to the nearest
+//! range lands on ρ = ρ_min, with no room for the true rover, off its belief, to be
+//! in range and in view (the simulated missions lost rendezvous there); so last, of
+//! the poses within 1e-6 of the lowest cost found, it moves to one with the most
+//! margin to the detection range's ends and the image's edges ([`TieBreak`],
+//! `margin.rs`). (SPEC §8 names SciPy's defaults for `dyfos` and allows
+//! improvements "when a benchmark shows they find lower costs at little extra
+//! time"; the default reads the population size as one of the settings such an
+//! improvement may change, and a cost within 1e-6 as a tie. SciPy's search stays
 //! available bit for bit as `dyfos-scipy`.)
 //!
 //! The mirrored polish: a pattern search from the best member with a step per
