@@ -333,7 +333,9 @@ impl Search for DifferentialEvolution {
             }
         }
         let widened = match (self.tie_break, eval.stopped(), eval.best()) {
-            (Some(rule), None, Some(lowest)) => Some(margin::widen(&rule, &mut eval, &space, lowest, |e| energy(Some(e)))),
+            (Some(rule), None, Some(lowest)) => {
+                Some(margin::widen(&rule, &mut eval, &space, lowest, |e| energy(Some(e))))
+            }
             _ => None,
         };
         let mut outcome = eval.finish(stop);

@@ -181,7 +181,11 @@ mod tests {
         let control = SearchControl::seeded(seed);
         let (t, b) = (dyfos.search(&lupp, &control), bare.search(&lupp, &control));
         let best = t.best.unwrap();
-        assert_eq!(lupp.evaluate(&best.x).cost(), Some(best.cost), "the tie-break returned another cost than its pose's");
+        assert_eq!(
+            lupp.evaluate(&best.x).cost(),
+            Some(best.cost),
+            "the tie-break returned another cost than its pose's"
+        );
         (best, b.best.unwrap(), t.stats.total, b.stats.total)
     }
 
@@ -220,7 +224,10 @@ mod tests {
 
     #[test]
     fn dyfos_scipy_has_no_tie_break() {
-        assert_eq!(AnySearch::from(Algorithm::DyfosScipy), AnySearch::DifferentialEvolution(DifferentialEvolution::scipy()));
+        assert_eq!(
+            AnySearch::from(Algorithm::DyfosScipy),
+            AnySearch::DifferentialEvolution(DifferentialEvolution::scipy())
+        );
         assert_eq!(DifferentialEvolution::scipy().tie_break, None);
         assert!(DifferentialEvolution::dyfos().tie_break.is_some());
     }

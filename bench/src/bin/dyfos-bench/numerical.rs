@@ -125,8 +125,12 @@ fn parse_de(spec: &str) -> anyhow::Result<Contender> {
                 }) = count()?;
                 de.polish = Polish::Raced { turns: u32::try_from(turns)?, heats, evaluations };
             }
-            "tiebreak" => de.tie_break = Some(TieBreak { tolerance: number, ..de.tie_break.unwrap_or(TieBreak::DEFAULT) }),
-            "widen" => de.tie_break = Some(TieBreak { evaluations: count()?, ..de.tie_break.unwrap_or(TieBreak::DEFAULT) }),
+            "tiebreak" => {
+                de.tie_break = Some(TieBreak { tolerance: number, ..de.tie_break.unwrap_or(TieBreak::DEFAULT) })
+            }
+            "widen" => {
+                de.tie_break = Some(TieBreak { evaluations: count()?, ..de.tie_break.unwrap_or(TieBreak::DEFAULT) })
+            }
             "notiebreak" => de.tie_break = None,
             _ => bail!(
                 "--de `{spec}`: unknown key `{key}` (popsize, tol, atol, generations, polish, mirrored, recombination, stall, epsilon, nostall, floor, turns, heats, raced, tiebreak, widen, notiebreak)"
