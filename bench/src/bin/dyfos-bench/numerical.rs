@@ -343,3 +343,27 @@ fn raw_json(run: &Evaluation, args: &NumericalArgs) -> String {
     });
     serde_json::to_string_pretty(&doc).expect("JSON values serialize")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn de_of(spec: &str) -> DifferentialEvolution {
+        match parse_de(spec).unwrap().search {
+            AnySearch::DifferentialEvolution(de) => de,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn de_keys_set_the_tie_break() {
+        assert_eq!(de_of("d:").tie_break, Some(TieBreak::DEFAULT));
+        assert_eq!(de_of("d:notiebreak=1").tie_break, None);
+        assert_eq!(de_of("d:notiebreak=1,widen=8").tie_break, Some(TieBreak { evaluations: 8, ..TieBreak::DEFAULT }));
+        assert_eq!(de_of("d:tiebreak=0.001,widen=0").tie_break, Some(TieBreak { tolerance: 0.001, evaluations: 0 }));
+        // The former default, as the flag's documentation spells it.
+        let before = de_of("before:popsize=15,nostall=1,mirrored=150,floor=1e-9,notiebreak=1");
+        assert_eq!(before, DifferentialEvolution::mirrored());
+        assert!(parse_de("d:widen=1.5").is_err());
+    }
+}
