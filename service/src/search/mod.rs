@@ -22,11 +22,13 @@
 
 mod brute;
 mod de;
+mod margin;
 mod sampling;
 mod stall;
 
 pub use brute::Brute;
 pub use de::{DifferentialEvolution, Polish};
+pub use margin::{TieBreak, margin};
 pub use sampling::{CenterView, RandomSampling};
 pub use stall::Stall;
 
@@ -216,6 +218,11 @@ impl<'l, 'a> Evaluator<'l, 'a> {
             self.best = Some(Found { x: *x, cost });
         }
         Some(e)
+    }
+
+    /// The lowest-cost feasible candidate evaluated so far (the first of equal costs).
+    pub fn best(&self) -> Option<Found> {
+        self.best
     }
 
     /// Why evaluation stopped early, if it did.

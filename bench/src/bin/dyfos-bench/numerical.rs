@@ -7,7 +7,7 @@ use dyfos_bench::numerical::{NumericalConfig, numerical_maps};
 use dyfos_bench::scaling::{MapKind, obstacle_scaling, scaling_table};
 use dyfos_bench::stats::Summary;
 use dyfos_bench::svg::{Series, ViolinPlot, line_plot};
-use dyfos_service::search::{AnySearch, DifferentialEvolution, Polish, Stall};
+use dyfos_service::search::{AnySearch, DifferentialEvolution, Polish, Stall, TieBreak};
 use dyfos_shared::answer::Algorithm;
 use dyfos_shared::params::ModelKind;
 use std::fmt::Write;
@@ -35,8 +35,11 @@ pub struct NumericalArgs {
     /// at most this many evaluations), mirrored (the adaptive polish from the best
     /// member and from its mirror image, this many each), turns, heats and raced (the
     /// raced polish: heats of this many evaluations from this many turns of the viewer
-    /// yaw, then at most `raced` from the lowest), floor (the polish's smallest step).
-    /// Repeatable. Example: `--de before:popsize=15,nostall=1,mirrored=150,floor=1e-9`.
+    /// yaw, then at most `raced` from the lowest), floor (the polish's smallest step),
+    /// tiebreak and widen (the margin tie-break: costs within this tolerance of the
+    /// lowest are ties, at most `widen` evaluations), notiebreak (the lowest cost found).
+    /// Repeatable. Example, the default before the raced setting:
+    /// `--de before:popsize=15,nostall=1,mirrored=150,floor=1e-9,notiebreak=1`.
     #[arg(long = "de", value_name = "NAME:SETTINGS")]
     de: Vec<String>,
     /// Threads for `brute` (default: all cores); the other algorithms use one.
@@ -122,8 +125,15 @@ fn parse_de(spec: &str) -> anyhow::Result<Contender> {
                 }) = count()?;
                 de.polish = Polish::Raced { turns: u32::try_from(turns)?, heats, evaluations };
             }
+            "tiebreak" => {
+                de.tie_break = Some(TieBreak { tolerance: number, ..de.tie_break.unwrap_or(TieBreak::DEFAULT) })
+            }
+            "widen" => {
+                de.tie_break = Some(TieBreak { evaluations: count()?, ..de.tie_break.unwrap_or(TieBreak::DEFAULT) })
+            }
+            "notiebreak" => de.tie_break = None,
             _ => bail!(
-                "--de `{spec}`: unknown key `{key}` (popsize, tol, atol, generations, polish, mirrored, recombination, stall, epsilon, nostall, floor, turns, heats, raced)"
+                "--de `{spec}`: unknown key `{key}` (popsize, tol, atol, generations, polish, mirrored, recombination, stall, epsilon, nostall, floor, turns, heats, raced, tiebreak, widen, notiebreak)"
             ),
         }
     }
@@ -332,4 +342,28 @@ fn raw_json(run: &Evaluation, args: &NumericalArgs) -> String {
         "contenders": contenders,
     });
     serde_json::to_string_pretty(&doc).expect("JSON values serialize")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn de_of(spec: &str) -> DifferentialEvolution {
+        match parse_de(spec).unwrap().search {
+            AnySearch::DifferentialEvolution(de) => de,
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn de_keys_set_the_tie_break() {
+        assert_eq!(de_of("d:").tie_break, Some(TieBreak::DEFAULT));
+        assert_eq!(de_of("d:notiebreak=1").tie_break, None);
+        assert_eq!(de_of("d:notiebreak=1,widen=8").tie_break, Some(TieBreak { evaluations: 8, ..TieBreak::DEFAULT }));
+        assert_eq!(de_of("d:tiebreak=0.001,widen=0").tie_break, Some(TieBreak { tolerance: 0.001, evaluations: 0 }));
+        // The former default, as the flag's documentation spells it.
+        let before = de_of("before:popsize=15,nostall=1,mirrored=150,floor=1e-9,notiebreak=1");
+        assert_eq!(before, DifferentialEvolution::mirrored());
+        assert!(parse_de("d:widen=1.5").is_err());
+    }
 }
