@@ -110,10 +110,16 @@ impl World {
     /// ([`Star::touches_cylinder`]); the segments are made only for an exact test.
     pub fn star_contact_near(&self, near: &Nearby, star: &Star) -> bool {
         let (lo, hi) = star.bounds();
-        self.contact_near(near, &lo, &hi, || star.segments(), |leaf| match leaf {
-            Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } => star.touches_cylinder(c),
-            _ => None,
-        })
+        self.contact_near(
+            near,
+            &lo,
+            &hi,
+            || star.segments(),
+            |leaf| match leaf {
+                Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } => star.touches_cylinder(c),
+                _ => None,
+            },
+        )
     }
 }
 
@@ -218,9 +224,14 @@ mod tests {
                 (i + 1, o)
             })
             .collect();
-        let world =
-            World::new(0, Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), obstacles, None)
-                .unwrap();
+        let world = World::new(
+            0,
+            Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(),
+            Sun::new(0.5, 0.0).unwrap(),
+            obstacles,
+            None,
+        )
+        .unwrap();
         let near = world.nearby(&Point3::new(-9.0, -9.0, -1.0), &Point3::new(9.0, 9.0, 5.0));
         let (mut hits, mut misses) = (0, 0);
         for _ in 0..20_000 {
