@@ -200,7 +200,7 @@ impl<'a> Lupp<'a> {
     /// Feasibility and cost of `x`: the hot path, no allocation.
     #[inline]
     pub fn evaluate(&self, x: &SensorState) -> Evaluation {
-        self.evaluate_pose(&self.rig.pose(&self.targets[0], x), &self.nearby)
+        self.evaluate_pose(&self.rig.pose(&self.targets[0], x), &self.nearby, false)
     }
 
     /// The obstacles near every collision star of the query: a search whose
@@ -214,10 +214,12 @@ impl<'a> Lupp<'a> {
     /// [`SensorRig::pose`] or its parts), its collision star checked against
     /// `near`: [`Lupp::nearby`], or a list narrowed from it by
     /// [`World::nearby_within`] (any region: a star outside it is answered by the
-    /// BVH). The verdict is [`Lupp::evaluate`]'s, bit for bit.
+    /// BVH). `sight_clear` skips the sight lines: the caller must have proved that
+    /// nothing solid is near them, e.g. by [`World::box_is_clear`] on a box holding
+    /// [`Lupp::sight_box`]. The verdict is [`Lupp::evaluate`]'s, bit for bit.
     #[inline]
-    pub fn evaluate_pose(&self, pose: &SensorPose, near: &Nearby) -> Evaluation {
-        if let Some(why) = self.first_violation(pose, near) {
+    pub fn evaluate_pose(&self, pose: &SensorPose, near: &Nearby, sight_clear: bool) -> Evaluation {
+        if let Some(why) = self.first_violation(pose, near, sight_clear) {
             return Evaluation::Rejected(why);
         }
         Evaluation::Feasible { cost: self.prior.cost(&self.noise(pose)) }
@@ -256,14 +258,14 @@ impl<'a> Lupp<'a> {
     }
 
     #[inline]
-    fn first_violation(&self, pose: &SensorPose, near: &Nearby) -> Option<Violation> {
+    fn first_violation(&self, pose: &SensorPose, near: &Nearby, sight_clear: bool) -> Option<Violation> {
         if !self.in_workspace(&pose.viewer_position) {
             return Some(Violation::Workspace);
         }
         if self.world.star_contact_near(near, &self.star(pose)) {
             return Some(Violation::Collision);
         }
-        if !self.fan.may_block(&pose.position) {
+        if sight_clear || !self.fan.may_block(&pose.position) {
             return None;
         }
         let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];

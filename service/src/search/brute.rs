@@ -10,9 +10,11 @@
 //!   `tan`, `normalize` and `sin_cos` per point;
 //! - the 72 yaws of one (ρ, ψ, φ) put the viewer on a circle: the query's list of
 //!   obstacles near any collision star is narrowed once per arc of `ARC` yaws to
-//!   those near the box around the arc's stars ([`World::nearby_within`]), so each
+//!   those near the box around the arc's stars ([`dyfos_shared::world::World::nearby_within`]), so each
 //!   star is compared with the few boxes left (mostly none); the sight lines go
-//!   through the query's sight fan, as for any candidate;
+//!   through the query's sight fan, as for any candidate, but on a map with a
+//!   voxel grid (listed in every direction of the fan) an arc whose sight lines
+//!   have nothing solid near ([`dyfos_shared::world::World::box_is_clear`]) skips them;
 //! - threads take blocks of rows from a shared counter (infeasible rows are cheap,
 //!   so fixed shares are unbalanced), and each keeps, per block, only the points
 //!   that could still be the answer (each new minimum of the block, within 1e-9 of
@@ -217,15 +219,21 @@ impl Brute {
         let direction = &plan.directions[i_psi * nf + i_phi];
         let target = lupp.marker();
         let world = lupp.world();
+        let voxels = world.voxels().is_some();
         for (a, frames) in plan.frames[..count].chunks(ARC).enumerate() {
             row.poses.clear();
             let mut span: Option<(Point3<f64>, Point3<f64>)> = None;
+            let mut sight_span: Option<(Point3<f64>, Point3<f64>)> = None;
             for frame in frames {
                 let pose = lupp.rig().pose_from(&target, rho, direction, frame);
                 // A viewer outside the workspace fails before its star is checked.
                 if lupp.in_workspace(&pose.viewer_position) {
                     let (lo, hi) = lupp.collision_box(&pose);
                     span = Some(span.map_or((lo, hi), |(l, h)| (l.inf(&lo), h.sup(&hi))));
+                    if voxels {
+                        let (lo, hi) = lupp.sight_box(&pose);
+                        sight_span = Some(sight_span.map_or((lo, hi), |(l, h)| (l.inf(&lo), h.sup(&hi))));
+                    }
                 }
                 row.poses.push(pose);
             }
@@ -236,9 +244,12 @@ impl Brute {
                 }
                 None => lupp.nearby(),
             };
+            // A voxel grid is listed in every direction of the sight fan: when
+            // nothing solid is near the arc's sight lines, skip them all.
+            let sight_clear = sight_span.is_some_and(|(lo, hi)| world.box_is_clear(&lo, &hi));
             for (k, (pose, frame)) in row.poses.iter().zip(frames).enumerate() {
                 let x = SensorState { rho, psi, phi, yaw: frame.yaw };
-                match eval.evaluate_with(&x, |l| l.evaluate_pose(pose, near)) {
+                match eval.evaluate_with(&x, |l| l.evaluate_pose(pose, near, sight_clear)) {
                     None => return false,
                     Some(Evaluation::Feasible { cost }) if !cost.is_nan() => found(first + a * ARC + k, cost),
                     Some(_) => {}
