@@ -434,7 +434,7 @@ mod tests {
                 let (a, l) = (rng.next() * TAU, rng.next() * 6.0);
                 let sensor = marker + Vector3::new(l * a.cos(), l * a.sin(), rng.next() * 5.0 - 0.5);
                 let segments = sight_lines(&sensor, &marker, radius, theta);
-                for (_, o) in world.obstacles() {
+                for o in world.obstacles().values() {
                     let Obstacle::Cylinder(c) = o else { continue };
                     if fan.misses_cylinder_padded(&sensor, c, pad) {
                         missed += 1;
