@@ -52,7 +52,7 @@ fn axis(lo: f64, hi: f64, i: usize, n: usize) -> f64 {
 }
 
 /// Yaws of a row that share one narrowed list of obstacles near their stars.
-const ARC: usize = 8;
+const ARC: usize = 12;
 
 /// Rows (one (ρ, ψ, φ), all yaws) a thread takes at a time.
 const BLOCK_ROWS: usize = 8;
