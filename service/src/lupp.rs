@@ -27,8 +27,7 @@ use dyfos_shared::params::Params;
 use dyfos_shared::posterior::{Belief, Prior};
 use dyfos_shared::sdsmm::{Features, NoiseModel, Sdsmm};
 use dyfos_shared::sensor::{SearchSpace, SensorPose, SensorRig, SensorState};
-use dyfos_shared::world::{Blocker, Nearby, Segment, SightFan, World};
-use std::f64::consts::FRAC_1_SQRT_2;
+use dyfos_shared::world::{Blocker, Nearby, Segment, SightFan, Star, World};
 
 /// The constraint that rejected a candidate (SPEC §5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
@@ -110,18 +109,6 @@ pub struct Prediction {
 /// Occlusion segments are tested in batches of this many, on the stack.
 const SIGHT_BATCH: usize = 16;
 
-/// Unit directions of the 8 horizontal collision rays at yaw 0 (k·45°).
-const STAR: [(f64, f64); 8] = [
-    (1.0, 0.0),
-    (FRAC_1_SQRT_2, FRAC_1_SQRT_2),
-    (0.0, 1.0),
-    (-FRAC_1_SQRT_2, FRAC_1_SQRT_2),
-    (-1.0, 0.0),
-    (-FRAC_1_SQRT_2, -FRAC_1_SQRT_2),
-    (0.0, -1.0),
-    (FRAC_1_SQRT_2, -FRAC_1_SQRT_2),
-];
-
 /// The pipeline for one request: world, rendezvous belief, parameters and model,
 /// with everything that does not depend on the candidate precomputed.
 #[derive(Debug, Clone)]
@@ -146,16 +133,6 @@ pub struct Lupp<'a> {
     fan: SightFan,
     /// The obstacles near every collision star of the query.
     nearby: Nearby,
-}
-
-/// Segment checks of one candidate a caller has already proved to pass (by a
-/// region test over many candidates at once): [`Lupp::evaluate_pose`] skips them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Cleared {
-    /// No collision segment touches anything.
-    pub collision: bool,
-    /// No sight line touches anything.
-    pub occlusion: bool,
 }
 
 impl<'a> Lupp<'a> {
@@ -223,17 +200,26 @@ impl<'a> Lupp<'a> {
     /// Feasibility and cost of `x`: the hot path, no allocation.
     #[inline]
     pub fn evaluate(&self, x: &SensorState) -> Evaluation {
-        self.evaluate_pose(&self.rig.pose(&self.targets[0], x), Cleared::default())
+        self.evaluate_pose(&self.rig.pose(&self.targets[0], x), &self.nearby, false)
+    }
+
+    /// The obstacles near every collision star of the query: a search whose
+    /// candidates share a smaller region narrows it for them
+    /// ([`World::nearby_within`]).
+    pub fn nearby(&self) -> &Nearby {
+        &self.nearby
     }
 
     /// Feasibility and cost of the candidate whose pose is `pose` (from
-    /// [`SensorRig::pose`] or its parts), skipping the segment checks `cleared`
-    /// says pass. The caller must have proved them, e.g. by
-    /// [`World::box_is_clear`] on a box holding [`Lupp::collision_box`] or
-    /// [`Lupp::sight_box`]: then the verdict is [`Lupp::evaluate`]'s, bit for bit.
+    /// [`SensorRig::pose`] or its parts), its collision star checked against
+    /// `near`: [`Lupp::nearby`], or a list narrowed from it by
+    /// [`World::nearby_within`] (any region: a star outside it is answered by the
+    /// BVH). `sight_clear` skips the sight lines: the caller must have proved that
+    /// nothing solid is near them, e.g. by [`World::box_is_clear`] on a box holding
+    /// [`Lupp::sight_box`]. The verdict is [`Lupp::evaluate`]'s, bit for bit.
     #[inline]
-    pub fn evaluate_pose(&self, pose: &SensorPose, cleared: Cleared) -> Evaluation {
-        if let Some(why) = self.first_violation(pose, cleared) {
+    pub fn evaluate_pose(&self, pose: &SensorPose, near: &Nearby, sight_clear: bool) -> Evaluation {
+        if let Some(why) = self.first_violation(pose, near, sight_clear) {
             return Evaluation::Rejected(why);
         }
         Evaluation::Feasible { cost: self.prior.cost(&self.noise(pose)) }
@@ -249,8 +235,7 @@ impl<'a> Lupp<'a> {
     /// half-side `viewer_radius + safety_margin` around the viewer.
     #[inline]
     pub fn collision_box(&self, pose: &SensorPose) -> (Point3<f64>, Point3<f64>) {
-        let r = Vector3::repeat(self.reach);
-        (pose.viewer_position - r, pose.viewer_position + r)
+        self.star(pose).bounds()
     }
 
     /// A box holding every sight line of `pose` (SPEC §5.3): the sensor and the targets.
@@ -273,17 +258,14 @@ impl<'a> Lupp<'a> {
     }
 
     #[inline]
-    fn first_violation(&self, pose: &SensorPose, cleared: Cleared) -> Option<Violation> {
+    fn first_violation(&self, pose: &SensorPose, near: &Nearby, sight_clear: bool) -> Option<Violation> {
         if !self.in_workspace(&pose.viewer_position) {
             return Some(Violation::Workspace);
         }
-        if !cleared.collision {
-            let (lo, hi) = self.collision_box(pose);
-            if self.world.any_contact_near(&self.nearby, &lo, &hi, || self.collision_rays(pose)) {
-                return Some(Violation::Collision);
-            }
+        if self.world.star_contact_near(near, &self.star(pose)) {
+            return Some(Violation::Collision);
         }
-        if cleared.occlusion || !self.fan.may_block(&pose.position) {
+        if sight_clear || !self.fan.may_block(&pose.position) {
             return None;
         }
         let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
@@ -303,17 +285,10 @@ impl<'a> Lupp<'a> {
         None
     }
 
-    /// The 10 collision segments of SPEC §5.2: 8 horizontal at ψ_v + k·45°, then +z, −z.
+    /// The collision star of `pose` (SPEC §5.2).
     #[inline]
-    fn collision_rays(&self, pose: &SensorPose) -> [Segment; 10] {
-        let (s, c) = pose.viewer_yaw.sin_cos();
-        let p = pose.viewer_position;
-        let mut rays = [Segment::closed(p, Vector3::z(), self.reach); 10];
-        for (ray, (dx, dy)) in rays.iter_mut().zip(STAR) {
-            ray.dir = Vector3::new(c * dx - s * dy, s * dx + c * dy, 0.0);
-        }
-        rays[9].dir = -Vector3::z();
-        rays
+    fn star(&self, pose: &SensorPose) -> Star {
+        Star { center: pose.viewer_position, yaw: pose.viewer_yaw, reach: self.reach }
     }
 
     /// Everything about `x`, listing every blocker of the first failing constraint.
@@ -321,7 +296,7 @@ impl<'a> Lupp<'a> {
         let pose = self.rig.pose(&self.targets[0], x);
         let evaluation = self.evaluate(x);
         let blockers = match evaluation {
-            Evaluation::Rejected(Violation::Collision) => self.blockers(&self.collision_rays(&pose)),
+            Evaluation::Rejected(Violation::Collision) => self.blockers(&self.star(&pose).segments()),
             Evaluation::Rejected(Violation::Occlusion) => {
                 let sights: Vec<Segment> =
                     self.targets.iter().filter_map(|q| Segment::sight_line(&pose.position, q, 1e-6)).collect();

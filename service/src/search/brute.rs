@@ -8,21 +8,24 @@
 //! - a pose is assembled from parts computed once per search (`d_s` per (ψ, φ),
 //!   the rotation and offset per ψ_v: [`SensorRig::pose_from`]), not from
 //!   `tan`, `normalize` and `sin_cos` per point;
-//! - the 72 yaws of one (ρ, ψ, φ) put the viewer and the sensor on two circles:
-//!   when nothing solid is near the box around an arc's collision stars (or its
-//!   sight lines), every yaw of the arc passes that check without casting rays
-//!   ([`World::box_is_clear`]); otherwise its rays are cast as for one point;
+//! - the 72 yaws of one (ρ, ψ, φ) put the viewer on a circle: the query's list of
+//!   obstacles near any collision star is narrowed once per arc of `ARC` yaws to
+//!   those near the box around the arc's stars ([`dyfos_shared::world::World::nearby_within`]), so each
+//!   star is compared with the few boxes left (mostly none); the sight lines go
+//!   through the query's sight fan, as for any candidate, but on a map with a
+//!   voxel grid (listed in every direction of the fan) an arc whose sight lines
+//!   have nothing solid near ([`dyfos_shared::world::World::box_is_clear`]) skips them;
 //! - threads take blocks of rows from a shared counter (infeasible rows are cheap,
 //!   so fixed shares are unbalanced), and each keeps, per block, only the points
 //!   that could still be the answer (each new minimum of the block, within 1e-9 of
 //!   the block's minimum) instead of a cost per point.
 
 use super::{Evaluator, Found, Search, SearchControl, SearchOutcome};
-use crate::lupp::{Cleared, Evaluation, Lupp};
+use crate::lupp::{Evaluation, Lupp};
 use dyfos_shared::answer::{EvalStats, StopReason};
 use dyfos_shared::math::{Point3, Vector3};
 use dyfos_shared::sensor::{SearchSpace, SensorPose, SensorRig, SensorState, YawFrame};
-use dyfos_shared::world::World;
+use dyfos_shared::world::Nearby;
 use std::f64::consts::PI;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -48,9 +51,8 @@ fn axis(lo: f64, hi: f64, i: usize, n: usize) -> f64 {
     }
 }
 
-/// Arcs of at most this many yaws are not split further: their yaws are checked
-/// one by one.
-const SMALLEST_ARC: usize = 4;
+/// Yaws of a row that share one narrowed list of obstacles near their stars.
+const ARC: usize = 12;
 
 /// Rows (one (ρ, ψ, φ), all yaws) a thread takes at a time.
 const BLOCK_ROWS: usize = 8;
@@ -111,33 +113,10 @@ impl Plan {
 /// A point that may be the answer: its index and cost.
 type Record = (usize, f64);
 
-/// One thread's reusable buffers (sized to a row once, so no allocation per point).
+/// One thread's reusable buffers (sized once, so no allocation per point).
 struct Row {
     poses: Vec<SensorPose>,
-    collision_boxes: Vec<Option<(Point3<f64>, Point3<f64>)>>,
-    sight_boxes: Vec<Option<(Point3<f64>, Point3<f64>)>>,
-    cleared: Vec<Cleared>,
-}
-
-/// Marks the yaws `range` of a row whose boxes (`None`: the yaw fails earlier, so
-/// needs no check) all lie in a clear region, splitting arcs that are not clear.
-fn clear_arcs(
-    world: &World,
-    boxes: &[Option<(Point3<f64>, Point3<f64>)>],
-    range: std::ops::Range<usize>,
-    mark: &mut dyn FnMut(usize),
-) {
-    let Some((lo, hi)) = boxes[range.clone()].iter().flatten().copied().reduce(|(a, b), (c, d)| (a.inf(&c), b.sup(&d)))
-    else {
-        return;
-    };
-    if world.box_is_clear(&lo, &hi) {
-        range.for_each(mark);
-    } else if range.len() > SMALLEST_ARC {
-        let mid = range.start + range.len() / 2;
-        clear_arcs(world, boxes, range.start..mid, mark);
-        clear_arcs(world, boxes, mid..range.end, mark);
-    }
+    near: Nearby,
 }
 
 impl Search for Brute {
@@ -160,12 +139,7 @@ impl Search for Brute {
                     scope.spawn(move || {
                         let mut eval = Evaluator::new(lupp, control);
                         let mut records = Vec::new();
-                        let mut row = Row {
-                            poses: Vec::with_capacity(ny),
-                            collision_boxes: Vec::with_capacity(ny),
-                            sight_boxes: Vec::with_capacity(ny),
-                            cleared: Vec::with_capacity(ny),
-                        };
+                        let mut row = Row { poses: Vec::with_capacity(ARC), near: Nearby::default() };
                         let mut block_records = Vec::new();
                         'blocks: loop {
                             let block = next_block.fetch_add(1, Ordering::Relaxed);
@@ -245,27 +219,41 @@ impl Brute {
         let direction = &plan.directions[i_psi * nf + i_phi];
         let target = lupp.marker();
         let world = lupp.world();
-        row.poses.clear();
-        row.collision_boxes.clear();
-        row.sight_boxes.clear();
-        for frame in &plan.frames[..count] {
-            let pose = lupp.rig().pose_from(&target, rho, direction, frame);
-            let admitted = lupp.in_workspace(&pose.viewer_position);
-            row.collision_boxes.push(admitted.then(|| lupp.collision_box(&pose)));
-            row.sight_boxes.push(admitted.then(|| lupp.sight_box(&pose)));
-            row.poses.push(pose);
-        }
-        row.cleared.clear();
-        row.cleared.resize(count, Cleared::default());
-        let cleared = &mut row.cleared;
-        clear_arcs(world, &row.collision_boxes, 0..count, &mut |k| cleared[k].collision = true);
-        clear_arcs(world, &row.sight_boxes, 0..count, &mut |k| cleared[k].occlusion = true);
-        for (k, (pose, frame)) in row.poses.iter().zip(&plan.frames).enumerate() {
-            let x = SensorState { rho, psi, phi, yaw: frame.yaw };
-            match eval.evaluate_with(&x, |l| l.evaluate_pose(pose, row.cleared[k])) {
-                None => return false,
-                Some(Evaluation::Feasible { cost }) if !cost.is_nan() => found(first + k, cost),
-                Some(_) => {}
+        let voxels = world.voxels().is_some();
+        for (a, frames) in plan.frames[..count].chunks(ARC).enumerate() {
+            row.poses.clear();
+            let mut span: Option<(Point3<f64>, Point3<f64>)> = None;
+            let mut sight_span: Option<(Point3<f64>, Point3<f64>)> = None;
+            for frame in frames {
+                let pose = lupp.rig().pose_from(&target, rho, direction, frame);
+                // A viewer outside the workspace fails before its star is checked.
+                if lupp.in_workspace(&pose.viewer_position) {
+                    let (lo, hi) = lupp.collision_box(&pose);
+                    span = Some(span.map_or((lo, hi), |(l, h)| (l.inf(&lo), h.sup(&hi))));
+                    if voxels {
+                        let (lo, hi) = lupp.sight_box(&pose);
+                        sight_span = Some(sight_span.map_or((lo, hi), |(l, h)| (l.inf(&lo), h.sup(&hi))));
+                    }
+                }
+                row.poses.push(pose);
+            }
+            let near = match span {
+                Some((lo, hi)) => {
+                    world.nearby_within(lupp.nearby(), &lo, &hi, &mut row.near);
+                    &row.near
+                }
+                None => lupp.nearby(),
+            };
+            // A voxel grid is listed in every direction of the sight fan: when
+            // nothing solid is near the arc's sight lines, skip them all.
+            let sight_clear = sight_span.is_some_and(|(lo, hi)| world.box_is_clear(&lo, &hi));
+            for (k, (pose, frame)) in row.poses.iter().zip(frames).enumerate() {
+                let x = SensorState { rho, psi, phi, yaw: frame.yaw };
+                match eval.evaluate_with(&x, |l| l.evaluate_pose(pose, near, sight_clear)) {
+                    None => return false,
+                    Some(Evaluation::Feasible { cost }) if !cost.is_nan() => found(first + a * ARC + k, cost),
+                    Some(_) => {}
+                }
             }
         }
         true

@@ -68,9 +68,12 @@ struct Entry {
 /// nothing.
 #[derive(Debug, Clone, Default)]
 pub struct SightFan {
-    /// The marker, xy.
+    /// The marker.
     x: f64,
     y: f64,
+    z: f64,
+    /// Every target lies within this of the marker, in xy, at its height.
+    radius: f64,
     /// Sensors farther than this from the marker (xy) fall back to the BVH.
     range: f64,
     /// `entries[starts[b]..starts[b + 1]]` is bucket b, nearest first.
@@ -196,13 +199,15 @@ impl World {
             entries.extend(list);
         }
         starts.push(entries.len() as u32);
-        SightFan { x: mx, y: my, range, starts, entries, close }
+        SightFan { x: mx, y: my, z: marker.z, radius, range, starts, entries, close }
     }
 
     /// Whether any of `segments`, the sight lines from `sensor` to targets within the
-    /// fan's radius of its marker, touches anything: [`World::any_contact`]'s verdict,
-    /// bit for bit, by the exact tests of the obstacles the fan lists for `sensor`.
-    /// `[lo, hi]` holds every segment (for the voxel grid's broad phase).
+    /// fan's radius of its marker at the marker's height, touches anything:
+    /// [`World::any_contact`]'s verdict, bit for bit, by the exact tests of the
+    /// obstacles the fan lists for `sensor`, but for the cylinders the sensor's own
+    /// distances show out of reach ([`SightFan::misses_cylinder`]). `[lo, hi]`
+    /// holds every segment (for the voxel grid's broad phase).
     pub fn any_sight_contact(
         &self,
         fan: &SightFan,
@@ -218,14 +223,54 @@ impl World {
             if e.from > l {
                 break;
             }
-            if let Leaf::Voxels = self.leaves[e.leaf as usize]
-                && !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi))
-            {
-                continue;
+            match self.leaves[e.leaf as usize] {
+                Leaf::Voxels if !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi)) => continue,
+                Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } if fan.misses_cylinder(sensor, &c) => continue,
+                _ => {}
             }
             if self.leaf_touches(e.leaf, segments) {
                 return true;
             }
+        }
+        false
+    }
+}
+
+impl SightFan {
+    /// Whether no sight line from `sensor` can touch `cylinder`, by the fan's
+    /// reasoning for this one sensor: every sight line lies within the radius of
+    /// the segment marker–sensor in xy, and between their heights in z. Padded as
+    /// the fan's footprints ([`FanPad::SAFE`]), so `true` only where the exact test
+    /// is sure to find no contact.
+    #[inline]
+    fn misses_cylinder(&self, sensor: &Point3<f64>, cylinder: &super::VerticalCylinder) -> bool {
+        self.misses_cylinder_padded(sensor, cylinder, FanPad::SAFE)
+    }
+
+    #[inline(always)]
+    fn misses_cylinder_padded(&self, sensor: &Point3<f64>, cylinder: &super::VerticalCylinder, pad: FanPad) -> bool {
+        let (vx, vy) = (sensor.x - self.x, sensor.y - self.y);
+        let (wx, wy) = (cylinder.center.x - self.x, cylinder.center.y - self.y);
+        let size = vx.abs() + vy.abs() + wx.abs() + wy.abs() + cylinder.radius + self.radius;
+        let m = pad.absolute + pad.relative * size;
+        if sensor.z.min(self.z) > cylinder.height + m || sensor.z.max(self.z) < -m {
+            return true;
+        }
+        let vv = vx * vx + vy * vy;
+        let along = if vv > 0.0 { (wx * vx + wy * vy) / vv } else { 0.0 };
+        let t = along.clamp(0.0, 1.0);
+        let (ex, ey) = (wx - t * vx, wy - t * vy);
+        let reach = cylinder.radius + self.radius + m;
+        if ex * ex + ey * ey > reach * reach {
+            return true;
+        }
+        // The sight line to q is q + t·(sensor − q), within (1 − t)·radius of
+        // marker + t·(sensor − marker) in xy: it can meet the disc only for t within
+        // reach/|sensor − marker| of `along`, where, from a sensor above the marker,
+        // its height is at least marker_z + t·(sensor_z − marker_z).
+        if vv > 0.0 && sensor.z >= self.z {
+            let t_lo = (along - reach / vv.sqrt()).max(0.0);
+            return self.z + t_lo * (sensor.z - self.z) > cylinder.height + m;
         }
         false
     }
@@ -297,12 +342,17 @@ mod tests {
     /// The sight lines of a sensor to the marker and its perimeter, as the pipeline
     /// makes them.
     fn sight_lines(sensor: &Point3<f64>, marker: &Point3<f64>, radius: f64, theta: f64) -> Vec<Segment> {
+        targets(marker, radius, theta).iter().filter_map(|q| Segment::sight_line(sensor, q, 1e-6)).collect()
+    }
+
+    /// The marker and its 8 perimeter points.
+    fn targets(marker: &Point3<f64>, radius: f64, theta: f64) -> Vec<Point3<f64>> {
         let mut targets = vec![*marker];
         targets.extend((0..8).map(|k| {
             let a = theta + TAU * f64::from(k) / 8.0;
             Point3::new(marker.x + radius * a.cos(), marker.y + radius * a.sin(), marker.z)
         }));
-        targets.iter().filter_map(|q| Segment::sight_line(sensor, q, 1e-6)).collect()
+        targets
     }
 
     /// Counts the candidates whose fan verdict differs from the scan's, over random
@@ -366,6 +416,52 @@ mod tests {
     fn a_fan_too_tight_disagrees_with_the_scan() {
         let (wrong, _, _) = disagreements(FanPad { absolute: -1e-5, relative: 0.0, widen: false });
         assert!(wrong > 0, "the cases never graze the filter's edge");
+    }
+
+    /// Counts the sensors for which [`SightFan::misses_cylinder_padded`] says a
+    /// cylinder is out of reach while a sight line touches it, over cylinders
+    /// grazing the rover's disc and sensors anywhere in range; and the misses given.
+    fn cylinder_disagreements(pad: FanPad) -> (usize, usize) {
+        let mut rng = Lcg(77);
+        let (mut wrong, mut missed) = (0, 0);
+        for _ in 0..40 {
+            let marker = Point3::new(rng.next() * 100.0 - 50.0, rng.next() * 100.0 - 50.0, 0.2 + rng.next());
+            let radius = 0.4 + rng.next() * 0.6;
+            let theta = rng.next() * TAU;
+            let world = world_around(&mut rng, marker.xy(), radius, theta, 12, false);
+            let fan = world.sight_fan(&marker, radius, 6.0);
+            for _ in 0..500 {
+                let (a, l) = (rng.next() * TAU, rng.next() * 6.0);
+                let sensor = marker + Vector3::new(l * a.cos(), l * a.sin(), rng.next() * 5.0 - 0.5);
+                let segments = sight_lines(&sensor, &marker, radius, theta);
+                for o in world.obstacles().values() {
+                    let Obstacle::Cylinder(c) = o else { continue };
+                    if fan.misses_cylinder_padded(&sensor, c, pad) {
+                        missed += 1;
+                        if segments.iter().any(|s| c.first_contact(s).is_some_and(|t| s.reaches(t))) {
+                            wrong += 1;
+                        }
+                    }
+                }
+            }
+        }
+        (wrong, missed)
+    }
+
+    /// A cylinder the sensor's distances put out of reach is never touched.
+    #[test]
+    fn a_cylinder_out_of_reach_is_missed_by_every_sight_line() {
+        let (wrong, missed) = cylinder_disagreements(FanPad::SAFE);
+        assert_eq!(wrong, 0);
+        assert!(missed > 10_000, "{missed} misses: the test tests little");
+    }
+
+    /// The test above can fail: with the pad made 1e-5 m too small, cylinders
+    /// grazing the rover's disc are said out of reach where a sight line touches them.
+    #[test]
+    fn a_cylinder_test_too_tight_disagrees_with_the_exact_test() {
+        let (wrong, _) = cylinder_disagreements(FanPad { absolute: -1e-5, relative: 0.0, widen: false });
+        assert!(wrong > 0, "the cases never graze the bound");
     }
 
     /// A voxel grid whose box holds the marker is listed in every bucket.

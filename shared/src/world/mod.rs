@@ -28,6 +28,7 @@ mod obstacle;
 pub mod octomap;
 mod region;
 mod segment;
+mod star;
 mod voxels;
 
 pub(crate) use delta::StoredDelta;
@@ -36,6 +37,7 @@ pub use fan::SightFan;
 pub use nearby::Nearby;
 pub use obstacle::{AxisBox, Obstacle, ObstacleError, VerticalCylinder};
 pub use segment::{Segment, SegmentEnd};
+pub use star::Star;
 pub use voxels::{CellIndex, VoxelBlock, VoxelError, VoxelGrid};
 
 use crate::limits::{MAX_COORDINATE, MAX_OBSTACLES};

@@ -62,6 +62,45 @@ impl World {
         near
     }
 
+    /// [`World::nearby`] of the closed box `[lo, hi]`, written into `into` (its
+    /// buffers reused: no allocation once they are large enough), taken from
+    /// `from`'s list when `from`'s region holds the box and is not crowded (every
+    /// leaf near the box is then near `from`'s region, so listed there), else from
+    /// every leaf; the voxel grid only when an occupied cell may be near the box. A search whose candidates share a small region (a grid's arc of
+    /// yaws) narrows the query's list once for all of them.
+    pub fn nearby_within(&self, from: &Nearby, lo: &Point3<f64>, hi: &Point3<f64>, into: &mut Nearby) {
+        into.lo = [lo.x, lo.y, lo.z];
+        into.hi = [hi.x, hi.y, hi.z];
+        into.boxes.clear();
+        into.leaves.clear();
+        // Not `any(miss)`: a NaN keeps the leaf.
+        // The grid's box is large: it stays listed only when an occupied cell may be
+        // near the box (then each star is checked again, as for any list).
+        let meets = |b: &[f64; 6], leaf: u32| {
+            (0..3).all(|a| !(b[a + 3] < lo[a] || b[a] > hi[a]))
+                && (!matches!(self.leaves[leaf as usize], Leaf::Voxels)
+                    || self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi)))
+        };
+        let inside = (0..3).all(|a| from.lo[a] <= lo[a] && hi[a] <= from.hi[a]);
+        if inside && !from.crowded {
+            for (b, leaf) in from.boxes.iter().zip(&from.leaves) {
+                if meets(b, *leaf) {
+                    into.boxes.push(*b);
+                    into.leaves.push(*leaf);
+                }
+            }
+        } else {
+            for (i, b) in self.boxes.iter().enumerate() {
+                let b = [b.mins.x, b.mins.y, b.mins.z, b.maxs.x, b.maxs.y, b.maxs.z];
+                if meets(&b, i as u32) {
+                    into.boxes.push(b);
+                    into.leaves.push(i as u32);
+                }
+            }
+        }
+        into.crowded = into.leaves.len() > MOST;
+    }
+
     /// [`World::any_contact`]'s verdict on the batch `segments` makes, all inside
     /// the closed box `[lo, hi]`, testing exactly only the listed leaves whose boxes
     /// meet it; the batch is made only if one does (most stars meet nothing). Falls
@@ -72,6 +111,21 @@ impl World {
         lo: &Point3<f64>,
         hi: &Point3<f64>,
         segments: impl FnOnce() -> S,
+    ) -> bool {
+        self.contact_near(near, lo, hi, segments, |_| None)
+    }
+
+    /// [`World::any_contact_near`], where `decide` may give a listed leaf's verdict
+    /// on the batch without the exact test (`None`: test it). `decide` must agree
+    /// with the exact test wherever it answers.
+    #[inline]
+    pub(super) fn contact_near<S: AsRef<[Segment]>>(
+        &self,
+        near: &Nearby,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+        segments: impl FnOnce() -> S,
+        decide: impl Fn(&Leaf) -> Option<bool>,
     ) -> bool {
         let inside = (0..3).all(|a| near.lo[a] <= lo[a] && hi[a] <= near.hi[a]);
         if !inside || near.crowded {
@@ -89,6 +143,11 @@ impl World {
                 && !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi))
             {
                 continue;
+            }
+            match decide(&self.leaves[*leaf_id as usize]) {
+                Some(true) => return true,
+                Some(false) => continue,
+                None => {}
             }
             let batch = made.get_or_insert_with(|| (segments.take().expect("made once"))());
             if self.leaf_touches(*leaf_id, batch.as_ref()) {
@@ -188,6 +247,15 @@ mod tests {
                 let (rays, lo, hi) = star(p, yaw, reach);
                 let want = world.any_contact_by_scan(&rays);
                 let got = world.any_contact_near(&near, &lo, &hi, || rays);
+                if shrink == 0.0 {
+                    // Narrowed to the star's own box, or to a box around it.
+                    for grow in [0.0, 0.7] {
+                        let g = Vector3::repeat(grow);
+                        let mut narrow = Nearby::default();
+                        world.nearby_within(&near, &(lo - g), &(hi + g), &mut narrow);
+                        assert_eq!(world.any_contact_near(&narrow, &lo, &hi, || rays), want, "{rays:?}");
+                    }
+                }
                 if got != want {
                     wrong += 1;
                     assert!(shrink > 0.0, "{rays:?}: {got} != {want}");
