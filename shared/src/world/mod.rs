@@ -349,23 +349,15 @@ impl World {
         // viewer's collision star, or the sight lines to one rover).
         let mut near = [0u32; GATHER_CAPACITY];
         let mut count = 0;
-        let mut overflow = false;
-        self.bvh().traverse(|node| {
-            let (mins, maxs) = (node.mins(), node.maxs());
-            if (0..3).any(|a| maxs[a] < lo[a] || mins[a] > hi[a]) {
-                return TraversalAction::Prune;
+        let gathered = self.leaves_meeting_box(&lo, &hi, |leaf| {
+            if count == GATHER_CAPACITY {
+                return false;
             }
-            if let Some(leaf) = node.leaf_data() {
-                if count == GATHER_CAPACITY {
-                    overflow = true;
-                    return TraversalAction::EarlyExit;
-                }
-                near[count] = leaf;
-                count += 1;
-            }
-            TraversalAction::Continue
+            near[count] = leaf;
+            count += 1;
+            true
         });
-        if overflow {
+        if !gathered {
             return segments.iter().any(|s| self.segment_contact(s));
         }
         // The grid's leaf spans the whole grid: drop it when no occupied cell is near
@@ -382,42 +374,69 @@ impl World {
             .any(|s| near[..count].iter().any(|leaf| self.leaf_contact(*leaf, s).is_some_and(|t| s.reaches(t))))
     }
 
-    /// Whether one segment touches anything, by a BVH walk with early exit.
-    fn segment_contact(&self, seg: &Segment) -> bool {
-        let mut hit = false;
+    /// Calls `visit` with each leaf whose node boxes all meet the closed box
+    /// `[lo, hi]`, in the BVH's order, until `visit` returns `false`; returns whether
+    /// the walk ended without being stopped. Allocates nothing.
+    pub(crate) fn leaves_meeting_box(
+        &self,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+        mut visit: impl FnMut(u32) -> bool,
+    ) -> bool {
+        let mut finished = true;
         self.bvh().traverse(|node| {
-            if first_contact_aabb(seg, &node.mins(), &node.maxs()).is_none() {
+            let (mins, maxs) = (node.mins(), node.maxs());
+            if (0..3).any(|a| maxs[a] < lo[a] || mins[a] > hi[a]) {
                 return TraversalAction::Prune;
             }
             if let Some(leaf) = node.leaf_data()
-                && self.leaf_contact(leaf, seg).is_some_and(|t| seg.reaches(t))
+                && !visit(leaf)
             {
-                hit = true;
+                finished = false;
                 return TraversalAction::EarlyExit;
             }
             TraversalAction::Continue
         });
-        hit
+        finished
     }
 
-    /// Every obstacle the segment touches (up to its end), nearest first, with the
-    /// distance of first contact. For reports, not for the search.
-    pub fn contacts(&self, seg: &Segment) -> Vec<(Blocker, f64)> {
-        let mut found = Vec::new();
+    /// Calls `visit` with each leaf the segment touches (up to its end) and the
+    /// distance of first contact, in the BVH's order, until `visit` returns `false`;
+    /// returns whether the walk ended without being stopped.
+    fn contacts_along(&self, seg: &Segment, mut visit: impl FnMut(u32, f64) -> bool) -> bool {
+        let mut finished = true;
         self.bvh().traverse(|node| {
             if first_contact_aabb(seg, &node.mins(), &node.maxs()).is_none() {
                 return TraversalAction::Prune;
             }
             if let Some(leaf) = node.leaf_data()
                 && let Some(t) = self.leaf_contact(leaf, seg).filter(|t| seg.reaches(*t))
+                && !visit(leaf, t)
             {
-                let blocker = match self.leaves[leaf as usize] {
-                    Leaf::Solid { id, .. } => Blocker::Obstacle(id),
-                    Leaf::Voxels => Blocker::Voxels,
-                };
-                found.push((blocker, t));
+                finished = false;
+                return TraversalAction::EarlyExit;
             }
             TraversalAction::Continue
+        });
+        finished
+    }
+
+    /// Whether one segment touches anything, by a BVH walk with early exit.
+    fn segment_contact(&self, seg: &Segment) -> bool {
+        !self.contacts_along(seg, |_, _| false)
+    }
+
+    /// Every obstacle the segment touches (up to its end), nearest first, with the
+    /// distance of first contact. For reports, not for the search.
+    pub fn contacts(&self, seg: &Segment) -> Vec<(Blocker, f64)> {
+        let mut found = Vec::new();
+        self.contacts_along(seg, |leaf, t| {
+            let blocker = match self.leaves[leaf as usize] {
+                Leaf::Solid { id, .. } => Blocker::Obstacle(id),
+                Leaf::Voxels => Blocker::Voxels,
+            };
+            found.push((blocker, t));
+            true
         });
         found.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         found
@@ -456,7 +475,7 @@ fn span(segments: &[Segment]) -> Option<(Point3<f64>, Point3<f64>)> {
 mod tests {
     use super::*;
 
-    /// A tiny seeded generator for the world tests here and in `region`.
+    /// A tiny seeded generator for the world tests here and in `region`, `nearby`.
     pub(super) struct Lcg(pub(super) u64);
     impl Lcg {
         pub(super) fn next(&mut self) -> f64 {
@@ -465,7 +484,9 @@ mod tests {
         }
     }
 
-    fn random_world(rng: &mut Lcg, n: usize) -> World {
+    /// `n` cylinders and boxes over 20 × 20 m, and a sparse voxel grid if asked:
+    /// the random world the indexes and shortcuts are tested against the scan on.
+    pub(super) fn random_world(rng: &mut Lcg, n: usize, voxels: bool) -> World {
         let obstacles = (0..n).map(|i| {
             let o = if i % 3 == 2 {
                 let min = Point3::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0, rng.next() * 2.0);
@@ -483,25 +504,21 @@ mod tests {
             (i as u32 * 3 + 1, o)
         });
         let obstacles: Vec<_> = obstacles.collect();
-        let cells: Vec<_> = (0..40)
-            .map(|_| [(rng.next() * 40.0) as i64, (rng.next() * 40.0) as i64, (rng.next() * 6.0) as i64])
-            .collect();
-        let voxels = VoxelGrid::new(0.5, Point3::new(-10.0, -10.0, 0.0), cells).unwrap();
-        World::new(
-            0,
-            Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(),
-            Sun::new(0.5, 0.0).unwrap(),
-            obstacles,
-            Some(voxels),
-        )
-        .unwrap()
+        let grid = voxels.then(|| {
+            let cells: Vec<_> = (0..40)
+                .map(|_| [(rng.next() * 40.0) as i64, (rng.next() * 40.0) as i64, (rng.next() * 6.0) as i64])
+                .collect();
+            VoxelGrid::new(0.5, Point3::new(-10.0, -10.0, 0.0), cells).unwrap()
+        });
+        World::new(0, Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), obstacles, grid)
+            .unwrap()
     }
 
     #[test]
     fn bvh_agrees_with_scan() {
         let mut rng = Lcg(11);
         for n in [0, 1, 2, 25, 200] {
-            let world = random_world(&mut rng, n);
+            let world = random_world(&mut rng, n, true);
             let mut hits = 0;
             for i in 0..3000 {
                 let o = Point3::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0, rng.next() * 6.0);
@@ -652,7 +669,7 @@ mod tests {
     #[test]
     fn the_index_is_built_at_the_first_query_and_kept_by_clones() {
         let mut rng = Lcg(5);
-        let world = random_world(&mut rng, 25);
+        let world = random_world(&mut rng, 25, true);
         // Read for its content only (a snapshot): no index.
         assert!(world.bvh.get().is_none());
         let unqueried = world.clone();

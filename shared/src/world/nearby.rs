@@ -162,35 +162,9 @@ impl World {
 mod tests {
     use super::*;
     use crate::math::{Point2, Vector3};
-    use crate::world::tests::Lcg;
+    use crate::world::tests::{random_world, Lcg};
     use crate::world::{AxisBox, Bounds, Obstacle, Sun, VerticalCylinder, VoxelGrid};
     use std::f64::consts::{FRAC_1_SQRT_2, TAU};
-
-    fn world(rng: &mut Lcg, n: usize, voxels: bool) -> World {
-        let obstacles: Vec<(u32, Obstacle)> = (0..n)
-            .map(|i| {
-                let o = if i % 3 == 2 {
-                    let min = Point3::new(rng.next() * 16.0 - 8.0, rng.next() * 16.0 - 8.0, rng.next() * 3.0);
-                    Obstacle::Box(AxisBox { min, max: min + Vector3::repeat(0.1) + Vector3::repeat(rng.next()) })
-                } else {
-                    Obstacle::Cylinder(VerticalCylinder {
-                        center: Point2::new(rng.next() * 16.0 - 8.0, rng.next() * 16.0 - 8.0),
-                        radius: 0.1 + rng.next() * 0.7,
-                        height: 0.3 + rng.next() * 5.0,
-                    })
-                };
-                (i as u32 + 1, o)
-            })
-            .collect();
-        let grid = voxels.then(|| {
-            let cells: Vec<_> = (0..200)
-                .map(|_| [(rng.next() * 80.0) as i64, (rng.next() * 80.0) as i64, (rng.next() * 25.0) as i64])
-                .collect();
-            VoxelGrid::new(0.2, Point3::new(-8.0, -8.0, 0.0), cells).unwrap()
-        });
-        World::new(0, Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), obstacles, grid)
-            .unwrap()
-    }
 
     /// A collision star as the pipeline makes it: 8 horizontal rays at the yaw and
     /// its multiples of 45°, then up and down, each `reach` long.
@@ -213,7 +187,7 @@ mod tests {
         let mut rng = Lcg(17);
         let (mut wrong, mut hits, mut misses) = (0, 0, 0);
         for (n, voxels) in [(0, false), (3, false), (25, false), (80, false), (10, true)] {
-            let world = world(&mut rng, n, voxels);
+            let world = random_world(&mut rng, n, voxels);
             let marker = Point3::new(rng.next() * 4.0 - 2.0, rng.next() * 4.0 - 2.0, 0.3);
             let (half, reach) = (6.2, 0.6);
             let r = Vector3::repeat(half + reach);
@@ -285,7 +259,7 @@ mod tests {
     #[test]
     fn batches_outside_the_region_fall_back() {
         let mut rng = Lcg(2);
-        let world = world(&mut rng, 300, false);
+        let world = random_world(&mut rng, 300, false);
         let near = world.nearby(&Point3::new(-1.0, -1.0, 0.0), &Point3::new(1.0, 1.0, 1.0));
         assert!(!near.crowded && !near.is_empty());
         let crowded = world.nearby(&Point3::new(-10.0, -10.0, 0.0), &Point3::new(10.0, 10.0, 10.0));

@@ -7,7 +7,6 @@
 
 use super::{Leaf, World};
 use crate::math::{Point3, Vector3};
-use parry3d_f64::partitioning::TraversalAction;
 
 /// How far beyond the box [`World::box_is_clear`] looks, m: far more than the
 /// rounding of any segment end or contact point computed inside the box.
@@ -24,62 +23,21 @@ impl World {
         if !lo.iter().chain(hi.iter()).all(|v| v.is_finite()) {
             return false;
         }
-        let mut clear = true;
-        self.bvh().traverse(|node| {
-            let (mins, maxs) = (node.mins(), node.maxs());
-            if (0..3).any(|a| maxs[a] < lo[a] || mins[a] > hi[a]) {
-                return TraversalAction::Prune;
-            }
-            if let Some(leaf) = node.leaf_data() {
-                // An obstacle's padded box meets the box: not clear (its shape may
-                // miss the box, but a search only loses the shortcut).
-                let touches = match self.leaves[leaf as usize] {
-                    Leaf::Solid { .. } => true,
-                    Leaf::Voxels => self.voxels.as_ref().is_some_and(|v| v.may_touch_box(&lo, &hi)),
-                };
-                if touches {
-                    clear = false;
-                    return TraversalAction::EarlyExit;
-                }
-            }
-            TraversalAction::Continue
-        });
-        clear
+        // An obstacle's padded box meets the box: not clear (its shape may miss the
+        // box, but a search only loses the shortcut).
+        self.leaves_meeting_box(&lo, &hi, |leaf| match self.leaves[leaf as usize] {
+            Leaf::Solid { .. } => false,
+            Leaf::Voxels => !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(&lo, &hi)),
+        })
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::tests::Lcg;
+    use crate::world::tests::{random_world, Lcg};
     use crate::world::{AxisBox, Bounds, Obstacle, Segment, Sun, VerticalCylinder, VoxelGrid};
     use nalgebra::Point2;
-
-    fn world(rng: &mut Lcg, n: usize, voxels: bool) -> World {
-        let obstacles: Vec<(u32, Obstacle)> = (0..n)
-            .map(|i| {
-                let o = if i % 2 == 0 {
-                    Obstacle::Cylinder(VerticalCylinder {
-                        center: Point2::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0),
-                        radius: 0.2 + rng.next(),
-                        height: 0.5 + rng.next() * 5.0,
-                    })
-                } else {
-                    let min = Point3::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0, rng.next() * 2.0);
-                    Obstacle::Box(AxisBox { min, max: min + Vector3::repeat(0.1 + rng.next()) })
-                };
-                (i as u32 + 1, o)
-            })
-            .collect();
-        let grid = voxels.then(|| {
-            let cells: Vec<_> = (0..60)
-                .map(|_| [(rng.next() * 100.0) as i64, (rng.next() * 100.0) as i64, (rng.next() * 20.0) as i64])
-                .collect();
-            VoxelGrid::new(0.2, Point3::new(-10.0, -10.0, 0.0), cells).unwrap()
-        });
-        World::new(0, Bounds::new([-10.0, -10.0, 10.0, 10.0]).unwrap(), Sun::new(0.5, 0.0).unwrap(), obstacles, grid)
-            .unwrap()
-    }
 
     /// Segments inside a clear box touch nothing, by the BVH and by the scan; and
     /// boxes around a contact are never clear.
@@ -88,7 +46,7 @@ mod tests {
         let mut rng = Lcg(3);
         let mut clear_boxes = 0;
         for (n, voxels) in [(0, false), (5, false), (30, false), (10, true), (60, true)] {
-            let world = world(&mut rng, n, voxels);
+            let world = random_world(&mut rng, n, voxels);
             for _ in 0..3000 {
                 let lo = Point3::new(rng.next() * 22.0 - 11.0, rng.next() * 22.0 - 11.0, rng.next() * 5.0);
                 let hi = lo + Vector3::new(rng.next() * 3.0, rng.next() * 3.0, rng.next() * 2.0);
