@@ -161,9 +161,9 @@ impl World {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::{Point2, Vector3};
-    use crate::world::tests::{random_world, Lcg};
-    use crate::world::{AxisBox, Bounds, Obstacle, Sun, VerticalCylinder, VoxelGrid};
+    use crate::math::Vector3;
+    use crate::world::Obstacle;
+    use crate::world::tests::{Lcg, random_world};
     use std::f64::consts::{FRAC_1_SQRT_2, TAU};
 
     /// A collision star as the pipeline makes it: 8 horizontal rays at the yaw and

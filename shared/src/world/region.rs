@@ -35,9 +35,8 @@ impl World {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::tests::{random_world, Lcg};
-    use crate::world::{AxisBox, Bounds, Obstacle, Segment, Sun, VerticalCylinder, VoxelGrid};
-    use nalgebra::Point2;
+    use crate::world::tests::{Lcg, random_world};
+    use crate::world::{AxisBox, Bounds, Obstacle, Segment, Sun};
 
     /// Segments inside a clear box touch nothing, by the BVH and by the scan; and
     /// boxes around a contact are never clear.
