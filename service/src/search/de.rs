@@ -482,6 +482,7 @@ impl Pattern {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::search::tests::with_lupp;
     use dyfos_shared::prelude::*;
 
     /// Map 21 of `dyfos-bench numerical --seed 2 --model anisotropic`: the evolution
@@ -519,12 +520,6 @@ mod tests {
         let (a, m) = (adaptive.search(&lupp, &control).best.unwrap(), mirrored.search(&lupp, &control).best.unwrap());
         assert!(a.cost > brute + 0.1 && a.x.yaw > 0.0, "{a:?}");
         assert!(m.cost < brute + 0.01 && m.x.yaw < 0.0, "{m:?}");
-    }
-
-    /// A scenario's search problem, for a test body.
-    fn with_lupp<T>(s: &Scenario, f: impl FnOnce(&Lupp) -> T) -> T {
-        let model = NoiseModel::from_params(&s.params).unwrap();
-        f(&Lupp::new(&s.world, &s.belief, &s.params, &model))
     }
 
     #[test]
