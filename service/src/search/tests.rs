@@ -15,6 +15,11 @@ pub(super) fn with_lupp<T>(s: &Scenario, f: impl FnOnce(&Lupp) -> T) -> T {
     f(&Lupp::new(&s.world, &s.belief, &s.params, &model))
 }
 
+/// [`with_lupp`] on `tests/data/example.json`.
+fn on_example<T>(f: impl FnOnce(&Lupp) -> T) -> T {
+    with_lupp(&example(), f)
+}
+
 fn algorithms() -> Vec<AnySearch> {
     let mut all: Vec<AnySearch> = Algorithm::ALL.into_iter().map(AnySearch::from).collect();
     // A coarse grid keeps the debug-build suite fast; the default grid is checked
@@ -25,8 +30,7 @@ fn algorithms() -> Vec<AnySearch> {
 
 #[test]
 fn every_algorithm_returns_a_feasible_pose_deterministically() {
-    let s = example();
-    with_lupp(&s, |lupp| {
+    on_example(|lupp| {
         for algo in algorithms() {
             for seed in [0, 1, 42] {
                 let control = SearchControl::seeded(seed);
@@ -48,8 +52,7 @@ fn every_algorithm_returns_a_feasible_pose_deterministically() {
 
 #[test]
 fn brute_is_the_same_on_any_thread_count() {
-    let s = example();
-    with_lupp(&s, |lupp| {
+    on_example(|lupp| {
         let brute = Brute { grid: [7, 5, 5, 36] };
         let one = brute.search(lupp, &SearchControl { threads: 1, ..SearchControl::seeded(0) });
         for threads in [2, 3, 8] {
@@ -62,8 +65,7 @@ fn brute_is_the_same_on_any_thread_count() {
 
 #[test]
 fn budget_caps_evaluations_and_keeps_answers_feasible() {
-    let s = example();
-    with_lupp(&s, |lupp| {
+    on_example(|lupp| {
         for algo in algorithms() {
             let out = algo.search(lupp, &SearchControl { budget: Some(100), ..SearchControl::seeded(3) });
             assert!(out.stats.total <= 100, "{algo:?}: {}", out.stats.total);
@@ -79,8 +81,7 @@ fn budget_caps_evaluations_and_keeps_answers_feasible() {
 
 #[test]
 fn a_past_deadline_stops_at_once() {
-    let s = example();
-    with_lupp(&s, |lupp| {
+    on_example(|lupp| {
         let past = std::time::Instant::now();
         for algo in algorithms() {
             let out = algo.search(lupp, &SearchControl { deadline: Some(past), ..SearchControl::seeded(3) });
@@ -142,8 +143,7 @@ fn adaptive_polish_reaches_the_image_centre_and_improves_on_scipy() {
     // With the `paper` model the noise grows with e = max(|u|, |v|), so the optimum
     // on the example is in the image centre: a kink that only the polish's centre
     // move reaches exactly. SciPy's search alone stops short of it.
-    let s = example();
-    with_lupp(&s, |lupp| {
+    on_example(|lupp| {
         for seed in [0, 1, 2] {
             let control = SearchControl::seeded(seed);
             let best = |de: DifferentialEvolution| de.search(lupp, &control).best.unwrap();
@@ -156,8 +156,7 @@ fn adaptive_polish_reaches_the_image_centre_and_improves_on_scipy() {
 
 #[test]
 fn a_raised_abandon_flag_stops_every_algorithm_at_once() {
-    let s = example();
-    with_lupp(&s, |lupp| {
+    on_example(|lupp| {
         let raised = AtomicBool::new(true);
         for algo in algorithms() {
             for threads in [1, 3] {
@@ -177,8 +176,7 @@ fn a_raised_abandon_flag_stops_every_algorithm_at_once() {
 
 #[test]
 fn the_abandon_flag_is_read_with_the_clock() {
-    let s = example();
-    with_lupp(&s, |lupp| {
+    on_example(|lupp| {
         let flag = AtomicBool::new(false);
         let control = SearchControl { abandon: Some(&flag), ..SearchControl::seeded(0) };
         let mut eval = Evaluator::new(lupp, &control);
@@ -203,8 +201,7 @@ fn the_abandon_flag_is_read_with_the_clock() {
 
 #[test]
 fn an_abandon_flag_never_raised_changes_nothing() {
-    let s = example();
-    with_lupp(&s, |lupp| {
+    on_example(|lupp| {
         let lowered = AtomicBool::new(false);
         for algo in algorithms() {
             for threads in [1, 2, 3] {
@@ -236,8 +233,7 @@ impl super::Checkpoint for SlowCheckpoint {
 
 #[test]
 fn a_search_held_at_its_checkpoints_gives_the_same_answer() {
-    let s = example();
-    with_lupp(&s, |lupp| {
+    on_example(|lupp| {
         for algo in algorithms() {
             for threads in [1, 3] {
                 let held = SlowCheckpoint::default();
