@@ -69,6 +69,11 @@ pub struct LatencyArgs {
     /// Mixed run: `dyfos` clients keeping the workers busy.
     #[arg(long, default_value_t = 4)]
     mixed_dyfos_clients: usize,
+    /// Mixed and contention runs: the `dyfos` clients send this many queries a second
+    /// over all of them (open loop) instead of back to back, so that two daemons
+    /// whose searches differ in speed are compared under the same load; 0: back to back.
+    #[arg(allow_hyphen_values = true, long, default_value_t = 0.0)]
+    mixed_dyfos_rate: f64,
     /// Before/after: also run the one-client closed loops, the first null rate in
     /// open loop, the mixed run and the contention runs against a second daemon
     /// started with these extra flags (e.g.
@@ -793,10 +798,9 @@ fn run_with_daemon(b: &Bench, dyfosd: &Path) -> anyhow::Result<Outcome> {
     }
     let mixed = a.workloads.contains(&Workload::Null) && a.workloads.contains(&Workload::Dyfos);
     if mixed && a.mixed_null_rate > 0.0 && a.mixed_dyfos_clients > 0 {
-        rows.extend(b.run_groups(&[
-            Group::open(Workload::Null, 1, a.mixed_null_rate),
-            Group::closed(Workload::Dyfos, a.mixed_dyfos_clients),
-        ])?);
+        rows.extend(
+            b.run_groups(&[Group::open(Workload::Null, 1, a.mixed_null_rate), searches(a, a.mixed_dyfos_clients)])?,
+        );
     }
     let mut idle = None;
     if !a.skip_contention {
@@ -876,16 +880,26 @@ fn contention_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
     let n = a.mixed_dyfos_clients.max(1);
     let rate = if a.mixed_null_rate > 0.0 { a.mixed_null_rate } else { 1000.0 };
     let mut g = vec![
-        vec![Group::open(Workload::Stats, 1, rate), Group::closed(Workload::Dyfos, n)],
-        vec![Group::open(Workload::Map, 1, rate), Group::closed(Workload::Dyfos, n)],
-        vec![Group::closed(Workload::Dyfos, n)],
+        vec![Group::open(Workload::Stats, 1, rate), searches(a, n)],
+        vec![Group::open(Workload::Map, 1, rate), searches(a, n)],
+        vec![searches(a, n)],
     ];
     if let Some(h) = contention_hogs(a) {
-        g.push(vec![Group::closed(Workload::Hog, h), Group::closed(Workload::Dyfos, n)]);
+        g.push(vec![Group::closed(Workload::Hog, h), searches(a, n)]);
     }
     g.push(vec![Group::closed(Workload::Greedy, 1), Group::closed(Workload::Dyfos, 1)]);
     g.push(vec![Group::open(Workload::Null, 1, rate), Group::closed(Workload::Churn, 1)]);
     g
+}
+
+/// The `dyfos` clients the cheap requests of the mixed and contention runs run
+/// beside: back to back, or at `--mixed-dyfos-rate` over all of them.
+fn searches(a: &LatencyArgs, clients: usize) -> Group {
+    if a.mixed_dyfos_rate > 0.0 {
+        Group::open(Workload::Dyfos, clients, a.mixed_dyfos_rate)
+    } else {
+        Group::closed(Workload::Dyfos, clients)
+    }
 }
 
 /// The daemon's CPU use over `--idle-seconds` without traffic, in cores.
@@ -908,10 +922,7 @@ fn baseline_groups(a: &LatencyArgs) -> Vec<Vec<Group>> {
         configs.push(vec![Group::open(Workload::Null, a.open_clients, *r)]);
     }
     if a.mixed_null_rate > 0.0 && a.mixed_dyfos_clients > 0 {
-        configs.push(vec![
-            Group::open(Workload::Null, 1, a.mixed_null_rate),
-            Group::closed(Workload::Dyfos, a.mixed_dyfos_clients),
-        ]);
+        configs.push(vec![Group::open(Workload::Null, 1, a.mixed_null_rate), searches(a, a.mixed_dyfos_clients)]);
     }
     configs
 }
