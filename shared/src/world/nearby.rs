@@ -66,18 +66,18 @@ impl World {
     /// buffers reused: no allocation once they are large enough), taken from
     /// `from`'s list when `from`'s region holds the box and is not crowded (every
     /// leaf near the box is then near `from`'s region, so listed there), else from
-    /// every leaf; the voxel grid only when an occupied cell may be near the box. A search whose candidates share a small region (a grid's arc of
-    /// yaws) narrows the query's list once for all of them.
+    /// every leaf; the voxel grid only when an occupied cell may be near the box. A
+    /// search whose candidates share a small region (a grid's arc of yaws) narrows
+    /// the query's list once for all of them.
     pub fn nearby_within(&self, from: &Nearby, lo: &Point3<f64>, hi: &Point3<f64>, into: &mut Nearby) {
         into.lo = [lo.x, lo.y, lo.z];
         into.hi = [hi.x, hi.y, hi.z];
         into.boxes.clear();
         into.leaves.clear();
-        // Not `any(miss)`: a NaN keeps the leaf.
         // The grid's box is large: it stays listed only when an occupied cell may be
         // near the box (then each star is checked again, as for any list).
         let meets = |b: &[f64; 6], leaf: u32| {
-            (0..3).all(|a| !(b[a + 3] < lo[a] || b[a] > hi[a]))
+            !misses(b, lo, hi)
                 && (!matches!(self.leaves[leaf as usize], Leaf::Voxels)
                     || self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi)))
         };
@@ -134,7 +134,7 @@ impl World {
         let mut made: Option<S> = None;
         let mut segments = Some(segments);
         for (b, leaf_id) in near.boxes.iter().zip(&near.leaves) {
-            if b[3] < lo.x || b[0] > hi.x || b[4] < lo.y || b[1] > hi.y || b[5] < lo.z || b[2] > hi.z {
+            if misses(b, lo, hi) {
                 continue;
             }
             // The grid's box is large: skip it when no occupied cell is near the star,
@@ -158,27 +158,26 @@ impl World {
     }
 }
 
+/// Whether the box `b` (`[min x, min y, min z, max x, max y, max z]`) misses the
+/// closed box `[lo, hi]`. Not `any(miss)` negated: a NaN keeps the leaf.
+#[inline]
+fn misses(b: &[f64; 6], lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+    b[3] < lo.x || b[0] > hi.x || b[4] < lo.y || b[1] > hi.y || b[5] < lo.z || b[2] > hi.z
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::math::Vector3;
-    use crate::world::Obstacle;
     use crate::world::tests::{Lcg, random_world};
-    use std::f64::consts::{FRAC_1_SQRT_2, TAU};
+    use crate::world::{Obstacle, Star};
+    use std::f64::consts::TAU;
 
-    /// A collision star as the pipeline makes it: 8 horizontal rays at the yaw and
-    /// its multiples of 45°, then up and down, each `reach` long.
-    fn star(p: Point3<f64>, yaw: f64, reach: f64) -> ([Segment; 10], Point3<f64>, Point3<f64>) {
-        let (s, c) = yaw.sin_cos();
-        let mut rays = [Segment::closed(p, Vector3::z(), reach); 10];
-        let dirs = [(1.0, 0.0), (FRAC_1_SQRT_2, FRAC_1_SQRT_2), (0.0, 1.0), (-FRAC_1_SQRT_2, FRAC_1_SQRT_2)];
-        for (k, ray) in rays.iter_mut().take(8).enumerate() {
-            let (dx, dy) = if k < 4 { dirs[k] } else { (-dirs[k - 4].0, -dirs[k - 4].1) };
-            ray.dir = Vector3::new(c * dx - s * dy, s * dx + c * dy, 0.0);
-        }
-        rays[9].dir = -Vector3::z();
-        let r = Vector3::repeat(reach);
-        (rays, p - r, p + r)
+    /// A collision star's segments and its cube, as the pipeline makes them.
+    fn star(center: Point3<f64>, yaw: f64, reach: f64) -> ([Segment; 10], Point3<f64>, Point3<f64>) {
+        let star = Star { center, yaw, reach };
+        let (lo, hi) = star.bounds();
+        (star.segments(), lo, hi)
     }
 
     /// Counts disagreements with the scan over collision stars placed anywhere in
