@@ -482,7 +482,7 @@ impl Pattern {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::search::tests::with_lupp;
+    use crate::search::tests::{example, with_lupp};
     use dyfos_shared::prelude::*;
 
     /// Map 21 of `dyfos-bench numerical --seed 2 --model anisotropic`: the evolution
@@ -495,38 +495,42 @@ mod tests {
     #[test]
     fn the_mirror_polish_leaves_the_far_side_basin() {
         let s = mirror_basin();
-        let model = NoiseModel::from_params(&s.params).unwrap();
-        let lupp = Lupp::new(&s.world, &s.belief, &s.params, &model);
-        // The grid optimum, `dyfos solve --algo brute` on this map.
-        let brute = -17.973484018360878;
-        let adaptive =
-            DifferentialEvolution { polish: Polish::Adaptive { evaluations: 300 }, ..DifferentialEvolution::scipy() };
-        let mirrored =
-            DifferentialEvolution { polish: Polish::Mirrored { evaluations: 150 }, ..DifferentialEvolution::scipy() };
-        let (mut near_adaptive, mut near_mirrored) = (0, 0);
-        for seed in 0..12 {
-            let control = SearchControl::seeded(seed);
-            let a = adaptive.search(&lupp, &control);
-            let m = mirrored.search(&lupp, &control);
-            // The same number of evaluations: 300 of polish either way, plus the mirror.
-            assert!(m.stats.total <= a.stats.total + 1, "seed {seed}: {} vs {}", m.stats.total, a.stats.total);
-            near_adaptive += usize::from(a.best.unwrap().cost < brute + 0.01);
-            near_mirrored += usize::from(m.best.unwrap().cost < brute + 0.01);
-        }
-        // Measured: 2 of 12 seeds reach the optimum with the adaptive polish alone, 8 with the mirror.
-        assert!(near_mirrored >= near_adaptive + 4, "mirrored {near_mirrored} vs adaptive {near_adaptive} of 12 seeds");
-        // Seed 1 is one that ends on the far side without the mirror.
-        let control = SearchControl::seeded(1);
-        let (a, m) = (adaptive.search(&lupp, &control).best.unwrap(), mirrored.search(&lupp, &control).best.unwrap());
-        assert!(a.cost > brute + 0.1 && a.x.yaw > 0.0, "{a:?}");
-        assert!(m.cost < brute + 0.01 && m.x.yaw < 0.0, "{m:?}");
+        with_lupp(&s, |lupp| {
+            // The grid optimum, `dyfos solve --algo brute` on this map.
+            let brute = -17.973484018360878;
+            let adaptive = DifferentialEvolution {
+                polish: Polish::Adaptive { evaluations: 300 },
+                ..DifferentialEvolution::scipy()
+            };
+            let mirrored = DifferentialEvolution::mirrored();
+            let (mut near_adaptive, mut near_mirrored) = (0, 0);
+            for seed in 0..12 {
+                let control = SearchControl::seeded(seed);
+                let a = adaptive.search(lupp, &control);
+                let m = mirrored.search(lupp, &control);
+                // The same number of evaluations: 300 of polish either way, plus the mirror.
+                assert!(m.stats.total <= a.stats.total + 1, "seed {seed}: {} vs {}", m.stats.total, a.stats.total);
+                near_adaptive += usize::from(a.best.unwrap().cost < brute + 0.01);
+                near_mirrored += usize::from(m.best.unwrap().cost < brute + 0.01);
+            }
+            // Measured: 2 of 12 seeds reach the optimum with the adaptive polish alone, 8 with the mirror.
+            assert!(
+                near_mirrored >= near_adaptive + 4,
+                "mirrored {near_mirrored} vs adaptive {near_adaptive} of 12 seeds"
+            );
+            // Seed 1 is one that ends on the far side without the mirror.
+            let control = SearchControl::seeded(1);
+            let (a, m) = (adaptive.search(lupp, &control).best.unwrap(), mirrored.search(lupp, &control).best.unwrap());
+            assert!(a.cost > brute + 0.1 && a.x.yaw > 0.0, "{a:?}");
+            assert!(m.cost < brute + 0.01 && m.x.yaw < 0.0, "{m:?}");
+        });
     }
 
     #[test]
     fn scipy_settings_keep_the_paper_optimizers_answers() {
         // `dyfos solve --algo dyfos-scipy --seed 7` of the build before the stall rule
         // and the raced polish (29927ff).
-        let example = Scenario::from_json(include_str!("../../../tests/data/example.json")).unwrap();
+        let example = example();
         let cases = [
             (
                 example,
@@ -552,7 +556,7 @@ mod tests {
 
     #[test]
     fn a_stall_stops_the_evolution_after_its_generations_and_not_before() {
-        let s = Scenario::from_json(include_str!("../../../tests/data/example.json")).unwrap();
+        let s = example();
         with_lupp(&s, |lupp| {
             let control = SearchControl::seeded(3);
             let scipy = DifferentialEvolution::scipy();

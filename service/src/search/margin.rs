@@ -143,7 +143,7 @@ pub(super) fn widen(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lupp::Lupp;
+    use crate::search::tests::with_lupp;
     use crate::search::{AnySearch, DifferentialEvolution, Search, SearchControl};
     use dyfos_shared::answer::Algorithm;
     use dyfos_shared::params::Params;
@@ -174,19 +174,19 @@ mod tests {
 
     /// The default and the same search without its tie-break, on one scenario and seed.
     fn with_and_without(s: &Scenario, seed: u64) -> (Found, Found, u64, u64) {
-        let model = NoiseModel::from_params(&s.params).unwrap();
-        let lupp = Lupp::new(&s.world, &s.belief, &s.params, &model);
-        let dyfos = DifferentialEvolution::dyfos();
-        let bare = DifferentialEvolution { tie_break: None, ..dyfos };
-        let control = SearchControl::seeded(seed);
-        let (t, b) = (dyfos.search(&lupp, &control), bare.search(&lupp, &control));
-        let best = t.best.unwrap();
-        assert_eq!(
-            lupp.evaluate(&best.x).cost(),
-            Some(best.cost),
-            "the tie-break returned another cost than its pose's"
-        );
-        (best, b.best.unwrap(), t.stats.total, b.stats.total)
+        with_lupp(s, |lupp| {
+            let dyfos = DifferentialEvolution::dyfos();
+            let bare = DifferentialEvolution { tie_break: None, ..dyfos };
+            let control = SearchControl::seeded(seed);
+            let (t, b) = (dyfos.search(lupp, &control), bare.search(lupp, &control));
+            let best = t.best.unwrap();
+            assert_eq!(
+                lupp.evaluate(&best.x).cost(),
+                Some(best.cost),
+                "the tie-break returned another cost than its pose's"
+            );
+            (best, b.best.unwrap(), t.stats.total, b.stats.total)
+        })
     }
 
     #[test]

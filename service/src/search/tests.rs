@@ -5,7 +5,7 @@ use super::*;
 use dyfos_shared::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-fn example() -> Scenario {
+pub(super) fn example() -> Scenario {
     Scenario::from_json(include_str!("../../../tests/data/example.json")).unwrap()
 }
 
