@@ -142,6 +142,8 @@ impl World {
     pub(crate) fn sight_fan_padded(&self, marker: &Point3<f64>, radius: f64, range: f64, pad: FanPad) -> SightFan {
         let (mx, my) = (marker.x, marker.y);
         let mut listed: Vec<(Entry, std::ops::Range<usize>)> = Vec::new();
+        let width = 2.0 * PI / BUCKETS as f64;
+        let widen = if pad.widen { width } else { 0.0 };
         for (i, leaf) in self.leaves.iter().enumerate() {
             // The footprint: a disc around (cx, cy) of radius r.
             let (cx, cy, r) = match leaf {
@@ -162,8 +164,6 @@ impl World {
                 continue;
             }
             let entry = Entry { from, leaf: i as u32 };
-            let width = 2.0 * PI / BUCKETS as f64;
-            let widen = if pad.widen { width } else { 0.0 };
             let half = if d > reach { (reach / d).asin() } else { PI };
             if half + widen >= PI || half.is_nan() {
                 listed.push((entry, 0..BUCKETS));
@@ -224,7 +224,7 @@ impl World {
                 break;
             }
             match self.leaves[e.leaf as usize] {
-                Leaf::Voxels if !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi)) => continue,
+                Leaf::Voxels if !self.voxels_may_touch(lo, hi) => continue,
                 Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } if fan.misses_cylinder(sensor, &c) => continue,
                 _ => {}
             }

@@ -324,6 +324,13 @@ impl World {
         }
     }
 
+    /// Whether an occupied voxel may come near the closed box `[lo, hi]`: the grid's
+    /// leaf spans the whole grid, so the queries ask this before testing it.
+    #[inline]
+    fn voxels_may_touch(&self, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+        self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi))
+    }
+
     /// Whether any of `segments` touches leaf `leaf` up to its own end.
     #[inline]
     fn leaf_touches(&self, leaf: u32, segments: &[Segment]) -> bool {

@@ -77,9 +77,7 @@ impl World {
         // The grid's box is large: it stays listed only when an occupied cell may be
         // near the box (then each star is checked again, as for any list).
         let meets = |b: &[f64; 6], leaf: u32| {
-            !misses(b, lo, hi)
-                && (!matches!(self.leaves[leaf as usize], Leaf::Voxels)
-                    || self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi)))
+            !misses(b, lo, hi) && (!matches!(self.leaves[leaf as usize], Leaf::Voxels) || self.voxels_may_touch(lo, hi))
         };
         let inside = (0..3).all(|a| from.lo[a] <= lo[a] && hi[a] <= from.hi[a]);
         if inside && !from.crowded {
@@ -140,7 +138,7 @@ impl World {
             // The grid's box is large: skip it when no occupied cell is near the star,
             // before making the batch.
             if let Leaf::Voxels = self.leaves[*leaf_id as usize]
-                && !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi))
+                && !self.voxels_may_touch(lo, hi)
             {
                 continue;
             }

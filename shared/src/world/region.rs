@@ -27,7 +27,7 @@ impl World {
         // box, but a search only loses the shortcut).
         self.leaves_meeting_box(&lo, &hi, |leaf| match self.leaves[leaf as usize] {
             Leaf::Solid { .. } => false,
-            Leaf::Voxels => !self.voxels.as_ref().is_some_and(|v| v.may_touch_box(&lo, &hi)),
+            Leaf::Voxels => !self.voxels_may_touch(&lo, &hi),
         })
     }
 }
