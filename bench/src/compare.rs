@@ -14,6 +14,13 @@
 //! building (as `dyfos-bench octomap` builds it) and cylinder maps as voxel grids,
 //! each scored with the models asked for.
 //!
+//! `--through dyfosd` asks each build's own daemon instead ([`Through::Daemon`]):
+//! one `dyfosd` per build, started once, each query sent by that build's `dyfos
+//! query`. Its `micros` is the daemon's search in a process that is already running,
+//! the time a robot waits; a fresh `dyfos solve` adds what a new process pays the
+//! first time through the search's code (its pages faulted in, cold caches and
+//! branch predictors, the CPU's features detected), the same for both builds.
+//!
 //! [`evaluation_floor`] is the other yardstick: the cost of one evaluation of a
 //! feasible candidate on an empty map in a tight loop, in this process. A query's
 //! time over (evaluations × floor) says how much of it is the search around the
@@ -24,6 +31,8 @@ use crate::octomap::{Building, RESOLUTION};
 use crate::stats::quantile_sorted;
 use crate::table::{self, Align};
 use anyhow::{Context, bail};
+use dyfos_process::child::KillOnDrop;
+use dyfos_service::launch::DyfosdCommand;
 use dyfos_service::learned::load_model;
 use dyfos_service::lupp::{Evaluation, Lupp};
 use dyfos_shared::answer::{Algorithm, EvalStats};
@@ -36,7 +45,7 @@ use dyfos_shared::world::octomap::write_bt;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// What kind of map a scenario holds (a column of the comparison).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
@@ -127,6 +136,35 @@ pub struct CompareConfig {
     pub building_cells: u64,
     /// The repository's `tests/data` (golden hard maps, OctoMap scenario, learned model).
     pub data: PathBuf,
+    /// Where each build answers.
+    pub through: Through,
+}
+
+/// Where each build answers the queries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Through {
+    /// A fresh `dyfos solve` process per query.
+    Solve,
+    /// The build's own `dyfosd`, started once, asked by the build's `dyfos query`
+    /// (`brute` then runs on the daemon's workers, not `threads`).
+    #[serde(rename = "dyfosd")]
+    Daemon,
+}
+
+impl Through {
+    /// The name `--through` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Through::Solve => "solve",
+            Through::Daemon => "dyfosd",
+        }
+    }
+
+    /// The kind named `s`.
+    pub fn from_name(s: &str) -> Option<Self> {
+        [Through::Solve, Through::Daemon].into_iter().find(|t| t.name() == s)
+    }
 }
 
 impl Default for CompareConfig {
@@ -141,6 +179,7 @@ impl Default for CompareConfig {
             maps: 20,
             building_cells: 200_000,
             data: PathBuf::from("tests/data"),
+            through: Through::Solve,
         }
     }
 }
@@ -251,8 +290,14 @@ pub fn write_cases(config: &CompareConfig, dir: &Path) -> anyhow::Result<Vec<Cas
             }
             for &model in &config.models {
                 let mut json = json.clone();
-                // `learned` is chosen by the model file; the scenario names a valid model.
-                let written = if model == Model::Anisotropic { "anisotropic" } else { "paper" };
+                // `dyfos solve` chooses `learned` by its model file, so there the
+                // scenario names a model valid without one; a daemon has the file
+                // and is asked for `learned` by the scenario.
+                let written = match (model, config.through) {
+                    (Model::Anisotropic, _) => "anisotropic",
+                    (Model::Learned, Through::Daemon) => "learned",
+                    _ => "paper",
+                };
                 json["params"]["model"] = written.into();
                 let scenario = dir.join(format!("{name}-{}.json", model.name()));
                 std::fs::write(&scenario, serde_json::to_string_pretty(&json)?)?;
@@ -296,6 +341,56 @@ pub fn dyfos_in(dir: &Path) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
+/// One build's `dyfosd`, on its own prefix, domain and state directory (removed on
+/// drop), asked through that build's `dyfos`.
+pub struct BuildDaemon {
+    dyfos: PathBuf,
+    prefix: String,
+    domain: String,
+    dir: PathBuf,
+    process: KillOnDrop,
+}
+
+impl BuildDaemon {
+    /// Starts the `dyfosd` beside `dyfos` (with the learned model `model`, if any)
+    /// and waits until it answers `dyfos stats`.
+    pub fn start(dyfos: &Path, tag: &str, model: Option<&Path>) -> anyhow::Result<Self> {
+        let dyfosd = dyfos.with_file_name(format!("dyfosd{}", std::env::consts::EXE_SUFFIX));
+        let name = format!("cmp{}{tag}", std::process::id());
+        let dir = std::env::temp_dir().join(&name);
+        std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let log = std::fs::File::create(dir.join("dyfosd.log"))?;
+        let (prefix, domain) = (format!("{name}/"), format!("{name}_"));
+        let mut command = DyfosdCommand::new(&dyfosd, &prefix, &dir.join("state")).domain(&domain).log("warn", log);
+        if let Some(model) = model {
+            command = command.args([std::ffi::OsStr::new("--model"), model.as_os_str()]);
+        }
+        let process = command.spawn().with_context(|| format!("cannot start {}", dyfosd.display()))?;
+        let mut daemon = BuildDaemon { dyfos: dyfos.to_path_buf(), prefix, domain, dir, process };
+        let started = Instant::now();
+        loop {
+            let status = Command::new(dyfos)
+                .arg("stats")
+                .args(["--prefix", &daemon.prefix, "--domain", &daemon.domain, "--timeout", "2"])
+                .output()?;
+            if status.status.success() {
+                return Ok(daemon);
+            }
+            if !daemon.process.is_running() || started.elapsed() > Duration::from_secs(60) {
+                bail!("{} did not come up; its log: {}", dyfosd.display(), daemon.dir.join("dyfosd.log").display());
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+}
+
+impl Drop for BuildDaemon {
+    fn drop(&mut self) {
+        self.process.terminate(Duration::from_secs(10));
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
 /// Runs `dyfos solve` of `dyfos` on `case` and reads its answer.
 pub fn solve_once(
     dyfos: &Path,
@@ -310,8 +405,22 @@ pub fn solve_once(
     if let Some(f) = &case.model_file {
         cmd.arg("--model").arg(f);
     }
-    let out = cmd.output().with_context(|| format!("cannot run {}", dyfos.display()))?;
-    let what = || format!("{} solve {} --algo {}", dyfos.display(), case.scenario.display(), algorithm.name());
+    run_answer(cmd, || format!("{} solve {} --algo {}", dyfos.display(), case.scenario.display(), algorithm.name()))
+}
+
+/// Asks `daemon` for `case` through its build's `dyfos query` and reads the answer.
+pub fn query_once(daemon: &BuildDaemon, case: &Case, algorithm: Algorithm, seed: u64) -> anyhow::Result<SolveRun> {
+    let mut cmd = Command::new(&daemon.dyfos);
+    cmd.arg("query").arg(&case.scenario).args(["--algo", algorithm.name(), "--seed", &seed.to_string()]);
+    cmd.args(["--prefix", &daemon.prefix, "--domain", &daemon.domain]);
+    run_answer(cmd, || {
+        format!("{} query {} --algo {}", daemon.dyfos.display(), case.scenario.display(), algorithm.name())
+    })
+}
+
+/// Runs `cmd`, a `dyfos` printing an answer as `solve` does, and reads the answer.
+fn run_answer(mut cmd: Command, what: impl Fn() -> String) -> anyhow::Result<SolveRun> {
+    let out = cmd.output().with_context(|| format!("cannot run {}", what()))?;
     match out.status.code() {
         Some(0) => {}
         // No feasible pose: an answer too, to be compared.
@@ -418,6 +527,8 @@ pub struct Comparison {
     pub rounds: usize,
     /// Threads given to `dyfos solve`.
     pub threads: usize,
+    /// Where each build answered.
+    pub through: Through,
     /// The evaluation floor per model, µs, when measured.
     pub floors: Vec<(Model, f64)>,
     /// One line per group.
@@ -438,6 +549,18 @@ pub fn compare(
     mut progress: impl FnMut(&str),
 ) -> anyhow::Result<Comparison> {
     let (a, b) = (dyfos_in(baseline_dir)?, dyfos_in(new_dir)?);
+    let daemons = match config.through {
+        Through::Solve => None,
+        Through::Daemon => {
+            let model = cases.iter().find_map(|c| c.model_file.as_deref());
+            progress("starting both builds' dyfosd");
+            Some((BuildDaemon::start(&a, "base", model)?, BuildDaemon::start(&b, "new", model)?))
+        }
+    };
+    let run = |dyfos: &Path, daemon: Option<&BuildDaemon>, case: &Case, algorithm: Algorithm, seed: u64| match daemon {
+        Some(daemon) => query_once(daemon, case, algorithm, seed),
+        None => solve_once(dyfos, case, algorithm, seed, config.threads),
+    };
     let mut queries = Vec::new();
     for case in cases {
         for &algorithm in &config.algorithms {
@@ -461,8 +584,8 @@ pub fn compare(
     for round in 0..config.rounds.max(1) {
         progress(&format!("round {}/{}: {} queries on each build", round + 1, config.rounds.max(1), queries.len()));
         for (case, algorithm, runs) in &mut queries {
-            runs.baseline.push(solve_once(&a, case, *algorithm, runs.seed, config.threads)?);
-            runs.new.push(solve_once(&b, case, *algorithm, runs.seed, config.threads)?);
+            runs.baseline.push(run(&a, daemons.as_ref().map(|d| &d.0), case, *algorithm, runs.seed)?);
+            runs.new.push(run(&b, daemons.as_ref().map(|d| &d.1), case, *algorithm, runs.seed)?);
         }
     }
     let queries: Vec<QueryRuns> = queries.into_iter().map(|(_, _, q)| q).collect();
@@ -483,6 +606,7 @@ pub fn compare(
         new: new_dir.to_path_buf(),
         rounds: config.rounds.max(1),
         threads: config.threads,
+        through: config.through,
         floors: floors.to_vec(),
         groups,
         queries,
@@ -548,10 +672,17 @@ impl Comparison {
         let differing: usize = self.groups.iter().map(|g| g.differing).sum();
         let _ = writeln!(
             out,
-            "\n{} queries, {} rounds, --threads {}: {}",
+            "\n{} queries, {} rounds, through {}{}: {}",
             self.queries.len(),
             self.rounds,
-            self.threads,
+            match self.through {
+                Through::Solve => "`dyfos solve`",
+                Through::Daemon => "each build's `dyfosd`",
+            },
+            match self.through {
+                Through::Solve => format!(" --threads {}", self.threads),
+                Through::Daemon => String::new(),
+            },
             if differing == 0 { "every answer identical".to_string() } else { format!("{differing} queries DIFFER") }
         );
         out
@@ -644,6 +775,10 @@ mod tests {
         }
         for m in [Model::Paper, Model::Anisotropic, Model::Learned] {
             assert_eq!(Model::from_name(m.name()), Some(m));
+        }
+        for t in [Through::Solve, Through::Daemon] {
+            assert_eq!(Through::from_name(t.name()), Some(t));
+            assert_eq!(serde_json::to_value(t).unwrap(), t.name());
         }
     }
 }

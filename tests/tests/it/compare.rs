@@ -1,5 +1,5 @@
-//! `dyfos-bench compare`: two builds' `dyfos solve` interleaved. Here the
-//! workspace's own build is its own baseline, so every answer must be identical.
+//! `dyfos-bench compare`: two builds' `dyfos solve` (or daemons) interleaved. Here
+//! the workspace's own build is its own baseline, so every answer must be identical.
 
 use dyfos_tests::{bin, bin_dir};
 use std::process::Command;
@@ -28,7 +28,10 @@ fn a_build_against_itself_gives_identical_answers_and_a_ratio() {
     assert!(stdout.contains("floor (paper): "), "{stdout}");
     let floor_column = row.split('|').nth(10).unwrap().trim();
     assert!(floor_column.contains(" / ") && !floor_column.contains("NaN"), "{row}");
-    assert!(stdout.contains("2 queries, 1 rounds, --threads 1: every answer identical"), "{stdout}");
+    assert!(
+        stdout.contains("2 queries, 1 rounds, through `dyfos solve` --threads 1: every answer identical"),
+        "{stdout}"
+    );
     let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let _ = std::fs::remove_file(&json);
     let queries = report["queries"].as_array().unwrap();
@@ -57,4 +60,45 @@ fn a_baseline_without_dyfos_is_a_clear_error() {
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("has no `dyfos` binary"), "{stderr}");
+}
+
+/// Runs `dyfos-bench compare` of this build against itself and returns the JSON report.
+fn compare_report(through: &str, models: &str) -> serde_json::Value {
+    let json = std::env::temp_dir().join(format!("dyfos-compare-{through}-{}.json", std::process::id()));
+    let out = Command::new(bin("dyfos-bench"))
+        .args(["compare", "--rounds", "1", "--count", "2", "--maps", "numerical", "--models", models])
+        .args(["--algos", "dyfos", "--threads", "1", "--no-floor", "--through", through])
+        .arg("--baseline")
+        .arg(bin_dir())
+        .arg("--new")
+        .arg(bin_dir())
+        .arg("--data")
+        .arg(dyfos_tests::data(""))
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("dyfos-bench runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let report = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let _ = std::fs::remove_file(&json);
+    report
+}
+
+#[test]
+fn through_each_builds_daemon_the_answers_are_those_of_dyfos_solve() {
+    let daemon = compare_report("dyfosd", "paper,learned");
+    let solve = compare_report("solve", "paper,learned");
+    assert_eq!(daemon["through"], "dyfosd");
+    let (d, s) = (daemon["queries"].as_array().unwrap(), solve["queries"].as_array().unwrap());
+    assert_eq!(d.len(), 4, "two maps, two models");
+    assert_eq!(d.len(), s.len());
+    for (d, s) in d.iter().zip(s) {
+        assert_eq!((&d["name"], &d["model"]), (&s["name"], &s["model"]));
+        assert!(d["new"][0]["answer"]["x"].is_array(), "{d}");
+        // The daemon's answer is `dyfos solve`'s, bit for bit, for both models.
+        assert_eq!(d["new"][0]["answer"], s["new"][0]["answer"], "{}", d["name"]);
+        assert_eq!(d["baseline"][0]["answer"], d["new"][0]["answer"]);
+        assert!(d["new"][0]["micros"].as_f64().unwrap() > 0.0);
+    }
 }

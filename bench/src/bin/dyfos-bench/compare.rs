@@ -4,7 +4,7 @@
 //! is identical.
 
 use anyhow::Context;
-use dyfos_bench::compare::{CompareConfig, MapKind, Model, compare, evaluation_floor, write_cases};
+use dyfos_bench::compare::{CompareConfig, MapKind, Model, Through, compare, evaluation_floor, write_cases};
 use dyfos_shared::answer::Algorithm;
 use std::path::PathBuf;
 
@@ -53,6 +53,11 @@ pub struct CompareArgs {
     /// query's `micros` over (its evaluations × the floor).
     #[arg(long)]
     no_floor: bool,
+    /// Where each build answers: `solve` (a fresh `dyfos solve` process per query)
+    /// or `dyfosd` (each build's daemon, started once, asked by its `dyfos query`:
+    /// the time a running daemon's search takes).
+    #[arg(long, default_value = "solve", value_parser = parse_through)]
+    through: Through,
     /// Also write the whole comparison (every run) as JSON here.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
@@ -64,6 +69,10 @@ fn parse_algorithm(s: &str) -> Result<Algorithm, String> {
 
 fn parse_model(s: &str) -> Result<Model, String> {
     Model::from_name(s).ok_or_else(|| format!("unknown model `{s}`: use paper, anisotropic or learned"))
+}
+
+fn parse_through(s: &str) -> Result<Through, String> {
+    Through::from_name(s).ok_or_else(|| format!("unknown `--through {s}`: use solve or dyfosd"))
 }
 
 fn parse_kind(s: &str) -> Result<MapKind, String> {
@@ -89,6 +98,7 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<()> {
         maps: args.count,
         building_cells: args.building_cells,
         data: args.data.clone(),
+        through: args.through,
     };
     let dir = args
         .scenarios
