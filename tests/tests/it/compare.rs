@@ -3,25 +3,11 @@
 
 use dyfos_tests::{bin, bin_dir};
 use std::process::Command;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 #[test]
 fn a_build_against_itself_gives_identical_answers_and_a_ratio() {
-    let json = std::env::temp_dir().join(format!("dyfos-compare-test-{}.json", std::process::id()));
-    let out = Command::new(bin("dyfos-bench"))
-        .args(["compare", "--rounds", "1", "--count", "2", "--maps", "numerical", "--models", "paper"])
-        .args(["--algos", "dyfos", "--threads", "1"])
-        .arg("--baseline")
-        .arg(bin_dir())
-        .arg("--new")
-        .arg(bin_dir())
-        .arg("--data")
-        .arg(dyfos_tests::data(""))
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .expect("dyfos-bench runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let (stdout, report) = compare_itself(&["--models", "paper"]);
     let row = stdout.lines().find(|l| l.starts_with("| dyfos | numerical | paper | 2 |")).expect("a group line");
     assert!(row.ends_with("| identical |"), "{row}");
     // The evaluation floor is measured and each query is set against it.
@@ -32,8 +18,6 @@ fn a_build_against_itself_gives_identical_answers_and_a_ratio() {
         stdout.contains("2 queries, 1 rounds, through `dyfos solve` --threads 1: every answer identical"),
         "{stdout}"
     );
-    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    let _ = std::fs::remove_file(&json);
     let queries = report["queries"].as_array().unwrap();
     assert_eq!(queries.len(), 2);
     for q in queries {
@@ -62,12 +46,15 @@ fn a_baseline_without_dyfos_is_a_clear_error() {
     assert!(stderr.contains("has no `dyfos` binary"), "{stderr}");
 }
 
-/// Runs `dyfos-bench compare` of this build against itself and returns the JSON report.
-fn compare_report(through: &str, models: &str) -> serde_json::Value {
-    let json = std::env::temp_dir().join(format!("dyfos-compare-{through}-{}.json", std::process::id()));
+/// `dyfos-bench compare` of this build against itself on two SPEC maps, one round,
+/// `dyfos` only, with `extra` flags: what it printed and its JSON report.
+fn compare_itself(extra: &[&str]) -> (String, serde_json::Value) {
+    static RUNS: AtomicU32 = AtomicU32::new(0);
+    let run = RUNS.fetch_add(1, Ordering::Relaxed);
+    let json = std::env::temp_dir().join(format!("dyfos-compare-{}-{run}.json", std::process::id()));
     let out = Command::new(bin("dyfos-bench"))
-        .args(["compare", "--rounds", "1", "--count", "2", "--maps", "numerical", "--models", models])
-        .args(["--algos", "dyfos", "--threads", "1", "--no-floor", "--through", through])
+        .args(["compare", "--rounds", "1", "--count", "2", "--maps", "numerical", "--algos", "dyfos", "--threads", "1"])
+        .args(extra)
         .arg("--baseline")
         .arg(bin_dir())
         .arg("--new")
@@ -78,17 +65,17 @@ fn compare_report(through: &str, models: &str) -> serde_json::Value {
         .arg(&json)
         .output()
         .expect("dyfos-bench runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     let report = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let _ = std::fs::remove_file(&json);
-    report
+    (stdout, report)
 }
 
 #[test]
 fn through_each_builds_daemon_the_answers_are_those_of_dyfos_solve() {
-    let daemon = compare_report("dyfosd", "paper,learned");
-    let solve = compare_report("solve", "paper,learned");
+    let (_, daemon) = compare_itself(&["--models", "paper,learned", "--no-floor", "--through", "dyfosd"]);
+    let (_, solve) = compare_itself(&["--models", "paper,learned", "--no-floor", "--through", "solve"]);
     assert_eq!(daemon["through"], "dyfosd");
     let (d, s) = (daemon["queries"].as_array().unwrap(), solve["queries"].as_array().unwrap());
     assert_eq!(d.len(), 4, "two maps, two models");
