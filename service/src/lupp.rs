@@ -24,7 +24,7 @@
 use dyfos_shared::answer::EvalStats;
 use dyfos_shared::math::{Cov2, Matrix3, Point3, Vector3};
 use dyfos_shared::params::Params;
-use dyfos_shared::posterior::{Belief, Prior};
+use dyfos_shared::posterior::{Belief, CostBound, Prior};
 use dyfos_shared::sdsmm::{Features, NoiseModel, Sdsmm};
 use dyfos_shared::sensor::{SearchSpace, SensorPose, SensorRig, SensorState};
 use dyfos_shared::world::{Blocker, Nearby, Segment, SightFan, Star, World};
@@ -223,6 +223,29 @@ impl<'a> Lupp<'a> {
             return Evaluation::Rejected(why);
         }
         Evaluation::Feasible { cost: self.prior.cost(&self.noise(pose)) }
+    }
+
+    /// [`Lupp::evaluate_pose`] for a search that only wants costs below `bound`
+    /// ([`Prior::cost_bound`] of [`Lupp::prior`]): the same verdict, and the same
+    /// cost bit for bit, but that a feasible candidate whose cost is sure to be at
+    /// least the bound reports +∞ (its logarithms are not taken).
+    #[inline]
+    pub fn evaluate_pose_below(
+        &self,
+        pose: &SensorPose,
+        near: &Nearby,
+        sight_clear: bool,
+        bound: &CostBound,
+    ) -> Evaluation {
+        if let Some(why) = self.first_violation(pose, near, sight_clear) {
+            return Evaluation::Rejected(why);
+        }
+        Evaluation::Feasible { cost: self.prior.cost_below(&self.noise(pose), bound).unwrap_or(f64::INFINITY) }
+    }
+
+    /// The rendezvous prior, with what the cost needs precomputed.
+    pub fn prior(&self) -> &Prior {
+        &self.prior
     }
 
     /// Whether a viewer at `p_v` is inside the map bounds and altitude limits (SPEC §5.1).

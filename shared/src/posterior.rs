@@ -94,14 +94,81 @@ impl Prior {
     /// `E = ln det Σ⁺ = ln det Σ⁻ + ln det R − ln det S` (closed-form 2×2 determinants).
     #[inline]
     pub fn cost(&self, r: &Cov2) -> f64 {
+        let (det_r, det_s) = self.determinants(r);
+        self.cost_of(det_r, det_s)
+    }
+
+    /// `det R` and `det S = det(Σ⁻_xy + R)`.
+    #[inline(always)]
+    fn determinants(&self, r: &Cov2) -> (f64, f64) {
         let r = r.matrix();
-        self.ln_det + det2(r).ln() - det2(&(self.xy + r)).ln()
+        (det2(r), det2(&(self.xy + r)))
+    }
+
+    #[inline(always)]
+    fn cost_of(&self, det_r: f64, det_s: f64) -> f64 {
+        self.ln_det + det_r.ln() - det_s.ln()
+    }
+
+    /// What [`Prior::cost_below`] compares with to prove a cost at least `bound`
+    /// without its logarithms. A bound it cannot use safely (not finite, or beyond
+    /// the range the proof covers) proves nothing.
+    pub fn cost_bound(&self, bound: f64) -> CostBound {
+        self.cost_bound_with_slack(bound, CostBound::SLACK)
+    }
+
+    fn cost_bound_with_slack(&self, bound: f64, slack: f64) -> CostBound {
+        let usable = bound.abs() <= CostBound::LOG_LIMIT && self.ln_det.abs() <= CostBound::LOG_LIMIT;
+        CostBound { ratio: if usable { (bound - self.ln_det + slack).exp() } else { f64::INFINITY } }
+    }
+
+    /// [`Prior::cost`], bit for bit, or `None` when that cost is sure to be at
+    /// least `bound`'s (then the two logarithms are not taken): for a search that
+    /// only wants costs below the best it has.
+    #[inline]
+    pub fn cost_below(&self, r: &Cov2, bound: &CostBound) -> Option<f64> {
+        let (det_r, det_s) = self.determinants(r);
+        let range = CostBound::DET_MIN..=CostBound::DET_MAX;
+        if range.contains(&det_r) && range.contains(&det_s) && det_r / det_s > bound.ratio {
+            return None;
+        }
+        Some(self.cost_of(det_r, det_s))
     }
 
     /// Σ⁺ by the full Kalman form.
     pub fn posterior(&self, r: &Cov2) -> Matrix3<f64> {
         predicted_posterior(&self.cov, r)
     }
+}
+
+/// A cost bound for [`Prior::cost_below`], as the ratio `det R / det S` above which
+/// the cost `ln det Σ⁻ + ln det R − ln det S` is at least the bound.
+///
+/// Why the comparison is safe: with both determinants in `[DET_MIN, DET_MAX]` their
+/// ratio is a normal number, off by half an ulp; the ratio here is
+/// `exp(bound − ln det Σ⁻ + SLACK)` to an ulp or two (or below the smallest normal
+/// number, which every such ratio exceeds), its argument off by a few ulps of
+/// `LOG_LIMIT`. A computed ratio above it thus proves
+/// `ln det R − ln det S > bound − ln det Σ⁻ + SLACK − 1e-11`, and the cost as
+/// computed (three roundings of numbers below `2·LOG_LIMIT` in size, a few ulps
+/// each, well under 1e-10 in all) is at least `bound`: `SLACK` is many times what
+/// the roundings can take.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CostBound {
+    ratio: f64,
+}
+
+impl CostBound {
+    /// Determinants outside this range are always costed exactly.
+    const DET_MIN: f64 = 1e-150;
+    const DET_MAX: f64 = 1e150;
+    /// Bounds and priors with a larger `|ln|` are never used to skip.
+    const LOG_LIMIT: f64 = 1e4;
+    /// How far above the bound a cost must be proved to be skipped.
+    const SLACK: f64 = 1e-9;
+
+    /// A bound that skips nothing.
+    pub const NONE: CostBound = CostBound { ratio: f64::INFINITY };
 }
 
 #[cfg(test)]
@@ -127,6 +194,75 @@ mod tests {
                 assert!((prior.matrix() - full).symmetric_eigenvalues().iter().all(|e| *e > -1e-12));
             }
         }
+    }
+
+    /// Costs and bounds over priors and noises from tight to loose, each bound at
+    /// a cost, a hair either side of it, or anywhere; `slack` as [`CostBound::SLACK`]
+    /// or not. Returns (costs skipped though below their bound, costs skipped,
+    /// exact costs that differ from [`Prior::cost`]'s bits).
+    fn skips(slack: f64) -> (usize, usize, usize) {
+        let mut k = 7u64;
+        let mut next = || {
+            k = k.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            (k >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut wrong, mut skipped, mut changed) = (0, 0, 0);
+        for _ in 0..300 {
+            let scale = 10f64.powf(next() * 8.0 - 5.0);
+            let (a, b, c) = (0.1 + next(), 0.1 + next(), next() - 0.5);
+            let prior = Cov3::from_rows(&[
+                [a * scale, c * scale * 0.3, 0.0],
+                [c * scale * 0.3, b * scale, 0.0],
+                [0.0, 0.0, 0.05],
+            ]);
+            let Ok(prior) = prior else { continue };
+            let prior = Prior::new(&prior);
+            let mut bound = 0.0;
+            for i in 0..200 {
+                let s = 10f64.powf(next() * 8.0 - 6.0);
+                let (x, y, z) = (0.1 + next(), 0.1 + next(), next() - 0.5);
+                let Ok(r) = Cov2::from_rows(&[[x * s, z * s * 0.3], [z * s * 0.3, y * s]]) else { continue };
+                let cost = prior.cost(&r);
+                if i % 3 == 0 {
+                    bound = cost;
+                }
+                let at = match i % 4 {
+                    0 => bound,
+                    1 => bound + (next() - 0.5) * 4e-9,
+                    2 => bound + (next() - 0.5) * 1e-12,
+                    _ => cost + (next() - 0.5) * 10.0,
+                };
+                match prior.cost_below(&r, &prior.cost_bound_with_slack(at, slack)) {
+                    None => {
+                        skipped += 1;
+                        wrong += usize::from(cost < at);
+                    }
+                    Some(c) => changed += usize::from(c.to_bits() != cost.to_bits()),
+                }
+            }
+        }
+        (wrong, skipped, changed)
+    }
+
+    /// A cost is skipped only when it is at least the bound; others are exact.
+    #[test]
+    fn a_skipped_cost_is_at_least_the_bound() {
+        let (wrong, skipped, changed) = skips(CostBound::SLACK);
+        assert_eq!((wrong, changed), (0, 0));
+        assert!(skipped > 10_000, "{skipped} skipped: the test tests little");
+        let r = Cov2::from_rows(&[[0.01, 0.0], [0.0, 0.01]]).unwrap();
+        let prior = Prior::new(&Cov3::from_rows(&[[0.2, 0.05, 0.0], [0.05, 0.1, 0.0], [0.0, 0.0, 0.05]]).unwrap());
+        for bound in [f64::INFINITY, f64::NAN, 2e4, -2e4] {
+            assert_eq!(prior.cost_below(&r, &prior.cost_bound(bound)), Some(prior.cost(&r)), "{bound}");
+        }
+        assert_eq!(prior.cost_below(&r, &CostBound::NONE), Some(prior.cost(&r)));
+    }
+
+    /// The test above can fail: with the slack turned the other way, costs just
+    /// below their bound are skipped.
+    #[test]
+    fn a_negative_slack_skips_costs_below_the_bound() {
+        assert!(skips(-CostBound::SLACK).0 > 0);
     }
 
     #[test]

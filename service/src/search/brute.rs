@@ -18,12 +18,16 @@
 //! - threads take blocks of rows from a shared counter (infeasible rows are cheap,
 //!   so fixed shares are unbalanced), and each keeps, per block, only the points
 //!   that could still be the answer (each new minimum of the block, within 1e-9 of
-//!   the block's minimum) instead of a cost per point.
+//!   the block's minimum) instead of a cost per point;
+//! - so a point's cost matters only below a bound (the block's minimum, or just
+//!   above the thread's): a feasible point whose determinants prove its cost at
+//!   least that far up skips the cost's logarithms ([`Lupp::evaluate_pose_below`]).
 
 use super::{Evaluator, Found, Search, SearchControl, SearchOutcome};
 use crate::lupp::{Evaluation, Lupp};
 use dyfos_shared::answer::{EvalStats, StopReason};
 use dyfos_shared::math::{Point3, Vector3};
+use dyfos_shared::posterior::{CostBound, Prior};
 use dyfos_shared::sensor::{SearchSpace, SensorPose, SensorRig, SensorState, YawFrame};
 use dyfos_shared::world::Nearby;
 use std::f64::consts::PI;
@@ -113,6 +117,64 @@ impl Plan {
 /// A point that may be the answer: its index and cost.
 type Record = (usize, f64);
 
+/// One thread's points that may still be the answer, kept per block of rows
+/// (each new minimum of the block, within 1e-9 of the block's minimum), and the
+/// bound above which a cost need not be computed exactly: the block's minimum (a
+/// point at or above it is no new minimum), or 2e-9 above the thread's (it cannot
+/// be within 1e-9 of the search's minimum, which is at most the thread's).
+struct Kept<'p> {
+    prior: &'p Prior,
+    records: Vec<Record>,
+    block: Vec<Record>,
+    block_min: f64,
+    thread_min: f64,
+    bound: CostBound,
+}
+
+impl<'p> Kept<'p> {
+    fn new(prior: &'p Prior) -> Self {
+        Kept {
+            prior,
+            records: Vec::new(),
+            block: Vec::new(),
+            block_min: f64::INFINITY,
+            thread_min: f64::INFINITY,
+            bound: CostBound::NONE,
+        }
+    }
+
+    /// Keeps the previous block's records and starts a new block.
+    fn next_block(&mut self) {
+        self.records.append(&mut self.block);
+        self.block_min = f64::INFINITY;
+        self.rebound();
+    }
+
+    /// A feasible point's cost (+∞ when it is sure to be at least the bound).
+    fn found(&mut self, index: usize, cost: f64) {
+        // A new minimum of the block: earlier records more than 1e-9 above it can
+        // no longer be the answer.
+        if cost < self.block_min {
+            self.block_min = cost;
+            self.block.retain(|(_, c)| *c <= cost + 1e-9);
+            self.block.push((index, cost));
+            self.thread_min = self.thread_min.min(cost);
+            self.rebound();
+        }
+    }
+
+    fn rebound(&mut self) {
+        let bound = self.block_min.min(self.thread_min + 2e-9);
+        self.bound = if bound.is_finite() { self.prior.cost_bound(bound) } else { CostBound::NONE };
+    }
+
+    /// Every record, the last block's included.
+    fn into_records(mut self) -> Vec<Record> {
+        self.records.append(&mut self.block);
+        self.records
+    }
+}
+
 /// One thread's reusable buffers (sized once, so no allocation per point).
 struct Row {
     poses: Vec<SensorPose>,
@@ -138,34 +200,23 @@ impl Search for Brute {
                     let (control, plan, next_block) = (&unbudgeted, &plan, &next_block);
                     scope.spawn(move || {
                         let mut eval = Evaluator::new(lupp, control);
-                        let mut records = Vec::new();
+                        let mut kept = Kept::new(lupp.prior());
                         let mut row = Row { poses: Vec::with_capacity(ARC), near: Nearby::default() };
-                        let mut block_records = Vec::new();
                         'blocks: loop {
                             let block = next_block.fetch_add(1, Ordering::Relaxed);
                             if block >= blocks {
                                 break;
                             }
-                            block_records.clear();
-                            let mut block_min = f64::INFINITY;
+                            kept.next_block();
                             for r in block * BLOCK_ROWS..((block + 1) * BLOCK_ROWS).min(rows) {
                                 let first = r * ny;
                                 let count = ny.min(n - first);
-                                if !self.scan_row(lupp, plan, &mut eval, &mut row, first, count, |i, cost| {
-                                    // A new minimum of the block: earlier records more than
-                                    // 1e-9 above it can no longer be the answer.
-                                    if cost < block_min {
-                                        block_min = cost;
-                                        block_records.retain(|(_, c): &Record| *c <= cost + 1e-9);
-                                        block_records.push((i, cost));
-                                    }
-                                }) {
-                                    records.extend_from_slice(&block_records);
+                                if !self.scan_row(lupp, plan, &mut eval, &mut row, first, count, &mut kept) {
                                     break 'blocks;
                                 }
                             }
-                            records.extend_from_slice(&block_records);
                         }
+                        let records = kept.into_records();
                         (eval.stats, eval.stopped(), records)
                     })
                 })
@@ -198,8 +249,8 @@ impl Search for Brute {
 
 impl Brute {
     /// Evaluates the `count` first yaws of the row starting at point `first`,
-    /// calling `found(index, cost)` for each feasible one (in index order). Returns
-    /// `false` when the evaluator stopped.
+    /// giving `kept` each feasible one (in index order). Returns `false` when the
+    /// evaluator stopped.
     #[allow(clippy::too_many_arguments)]
     fn scan_row(
         &self,
@@ -209,7 +260,7 @@ impl Brute {
         row: &mut Row,
         first: usize,
         count: usize,
-        mut found: impl FnMut(usize, f64),
+        kept: &mut Kept,
     ) -> bool {
         let [_, np, nf, ny] = self.grid;
         let i_phi = first / ny % nf;
@@ -249,9 +300,9 @@ impl Brute {
             let sight_clear = sight_span.is_some_and(|(lo, hi)| world.box_is_clear(&lo, &hi));
             for (k, (pose, frame)) in row.poses.iter().zip(frames).enumerate() {
                 let x = SensorState { rho, psi, phi, yaw: frame.yaw };
-                match eval.evaluate_with(&x, |l| l.evaluate_pose(pose, near, sight_clear)) {
+                match eval.evaluate_with(&x, |l| l.evaluate_pose_below(pose, near, sight_clear, &kept.bound)) {
                     None => return false,
-                    Some(Evaluation::Feasible { cost }) if !cost.is_nan() => found(first + a * ARC + k, cost),
+                    Some(Evaluation::Feasible { cost }) if !cost.is_nan() => kept.found(first + a * ARC + k, cost),
                     Some(_) => {}
                 }
             }
