@@ -54,7 +54,7 @@
 //! assert!((r.matrix()[(1, 1)] - 0.01).abs() < 1e-8 && (r.matrix()[(0, 0)] - 0.04).abs() < 1e-8);
 //! ```
 
-use super::mlp::{Layers, MAX_WIDTH};
+use super::mlp::{Layers, MAX_WIDTH, pad_rows};
 use super::{Features, Sdsmm};
 use crate::math::{Cov2, Matrix2};
 
@@ -219,10 +219,14 @@ pub enum LearnedModelError {
 pub struct Learned {
     weights: LearnedWeights,
     /// `w1`, `w2`, `w3` transposed (input-major), so each layer is a sum of scaled
-    /// contiguous rows: no horizontal sums, and the compiler vectorizes it.
+    /// contiguous rows: no horizontal sums, and it vectorizes; every row and bias
+    /// zero-padded to whole vectors (`mlp::pad_rows`).
     t1: Vec<f32>,
     t2: Vec<f32>,
     t3: Vec<f32>,
+    b1: Vec<f32>,
+    b2: Vec<f32>,
+    b3: Vec<f32>,
 }
 
 impl std::fmt::Debug for Learned {
@@ -331,10 +335,13 @@ impl Learned {
         if weights.note.len() > MAX_NOTE {
             return Err(LearnedModelError::Note { reason: "longer than 64 KiB" });
         }
-        let t1 = transpose(&weights.w1, h, LEARNED_INPUTS);
-        let t2 = transpose(&weights.w2, h, h);
-        let t3 = transpose(&weights.w3, LEARNED_OUTPUTS, h);
-        Ok(Learned { weights, t1, t2, t3 })
+        let t1 = pad_rows(&transpose(&weights.w1, h, LEARNED_INPUTS), h);
+        let t2 = pad_rows(&transpose(&weights.w2, h, h), h);
+        let t3 = pad_rows(&transpose(&weights.w3, LEARNED_OUTPUTS, h), LEARNED_OUTPUTS);
+        let b1 = pad_rows(&weights.b1, h);
+        let b2 = pad_rows(&weights.b2, h);
+        let b3 = pad_rows(&weights.b3, LEARNED_OUTPUTS);
+        Ok(Learned { weights, t1, t2, t3, b1, b2, b3 })
     }
 
     /// The weights.
@@ -468,11 +475,11 @@ impl Learned {
         let layers = Layers::<LEARNED_INPUTS, LEARNED_OUTPUTS> {
             hidden: w.hidden,
             t1: &self.t1,
-            b1: &w.b1,
+            b1: &self.b1,
             t2: &self.t2,
-            b2: &w.b2,
+            b2: &self.b2,
             t3: &self.t3,
-            b3: &w.b3,
+            b3: &self.b3,
         };
         let out = layers.forward(&x);
         out.map(f64::from)
