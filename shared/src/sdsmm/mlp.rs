@@ -96,7 +96,7 @@ impl<const I: usize, const O: usize> WithSimd for Forward<'_, '_, I, O> {
 pub(super) fn layer<S: Simd>(simd: S, input: &[f32], wt: &[f32], bias: &[f32], out: &mut [f32], n: usize) {
     let stride = padded(n);
     let lanes = S::F32_LANES;
-    debug_assert!(PAD % lanes == 0 && wt.len() >= input.len() * stride && bias.len() >= stride);
+    debug_assert!(PAD.is_multiple_of(lanes) && wt.len() >= input.len() * stride && bias.len() >= stride);
     let rows = &wt[..input.len() * stride];
     let mut vectors = n.div_ceil(lanes);
     let mut j = 0;
