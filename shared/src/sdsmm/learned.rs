@@ -54,7 +54,7 @@
 //! assert!((r.matrix()[(1, 1)] - 0.01).abs() < 1e-8 && (r.matrix()[(0, 0)] - 0.04).abs() < 1e-8);
 //! ```
 
-use super::mlp::{Layers, MAX_WIDTH};
+use super::mlp::{Layers, MAX_WIDTH, pad_rows};
 use super::{Features, Sdsmm};
 use crate::math::{Cov2, Matrix2};
 
@@ -86,13 +86,18 @@ pub fn learned_input(f: &Features) -> [f64; LEARNED_INPUTS] {
 /// R from the network's raw outputs (a, b, d) and the bearing β (see the module doc).
 #[inline]
 pub fn noise_from_outputs(out: &[f64; LEARNED_OUTPUTS], bearing: f64) -> Cov2 {
+    rotated_noise(out, bearing.sin_cos())
+}
+
+/// [`noise_from_outputs`] with `(sin β, cos β)` given.
+#[inline]
+fn rotated_noise(out: &[f64; LEARNED_OUTPUTS], (s, c): (f64, f64)) -> Cov2 {
     let (lo, hi) = LOG_STD_RANGE;
     let l11 = out[0].clamp(lo, hi).exp();
     let l21 = out[1];
     let l22 = out[2].clamp(lo, hi).exp();
     // L·Lᵀ in the line-of-sight frame, then rotated by β.
     let (p, q, r) = (l11 * l11, l11 * l21, l21 * l21 + l22 * l22);
-    let (s, c) = bearing.sin_cos();
     let xx = c * c * p - 2.0 * s * c * q + s * s * r;
     let yy = s * s * p + 2.0 * s * c * q + c * c * r;
     let xy = s * c * (p - r) + (c * c - s * s) * q;
@@ -219,10 +224,14 @@ pub enum LearnedModelError {
 pub struct Learned {
     weights: LearnedWeights,
     /// `w1`, `w2`, `w3` transposed (input-major), so each layer is a sum of scaled
-    /// contiguous rows: no horizontal sums, and the compiler vectorizes it.
+    /// contiguous rows: no horizontal sums, and it vectorizes; every row and bias
+    /// zero-padded to whole vectors (`mlp::pad_rows`).
     t1: Vec<f32>,
     t2: Vec<f32>,
     t3: Vec<f32>,
+    b1: Vec<f32>,
+    b2: Vec<f32>,
+    b3: Vec<f32>,
 }
 
 impl std::fmt::Debug for Learned {
@@ -331,10 +340,13 @@ impl Learned {
         if weights.note.len() > MAX_NOTE {
             return Err(LearnedModelError::Note { reason: "longer than 64 KiB" });
         }
-        let t1 = transpose(&weights.w1, h, LEARNED_INPUTS);
-        let t2 = transpose(&weights.w2, h, h);
-        let t3 = transpose(&weights.w3, LEARNED_OUTPUTS, h);
-        Ok(Learned { weights, t1, t2, t3 })
+        let t1 = pad_rows(&transpose(&weights.w1, h, LEARNED_INPUTS), h);
+        let t2 = pad_rows(&transpose(&weights.w2, h, h), h);
+        let t3 = pad_rows(&transpose(&weights.w3, LEARNED_OUTPUTS, h), LEARNED_OUTPUTS);
+        let b1 = pad_rows(&weights.b1, h);
+        let b2 = pad_rows(&weights.b2, h);
+        let b3 = pad_rows(&weights.b3, LEARNED_OUTPUTS);
+        Ok(Learned { weights, t1, t2, t3, b1, b2, b3 })
     }
 
     /// The weights.
@@ -468,11 +480,11 @@ impl Learned {
         let layers = Layers::<LEARNED_INPUTS, LEARNED_OUTPUTS> {
             hidden: w.hidden,
             t1: &self.t1,
-            b1: &w.b1,
+            b1: &self.b1,
             t2: &self.t2,
-            b2: &w.b2,
+            b2: &self.b2,
             t3: &self.t3,
-            b3: &w.b3,
+            b3: &self.b3,
         };
         let out = layers.forward(&x);
         out.map(f64::from)
@@ -482,7 +494,10 @@ impl Learned {
 impl Sdsmm for Learned {
     #[inline]
     fn noise(&self, f: &Features) -> Cov2 {
-        noise_from_outputs(&self.forward(&learned_input(f)), f.bearing)
+        // The rotation's sine and cosine first: they do not wait for the network, so
+        // they run while its chains of dependent adds do (the same numbers).
+        let rotation = f.bearing.sin_cos();
+        rotated_noise(&self.forward(&learned_input(f)), rotation)
     }
 }
 
@@ -563,6 +578,26 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The committed model's raw outputs on fixed inputs, as `f32` bits: pinned from
+    /// the forward pass before it was reorganised for speed, so any change of
+    /// summation order or `tanh` (which would change `learned` answers) fails here.
+    #[test]
+    fn committed_model_outputs_are_pinned_bit_for_bit() {
+        const PINNED: [[u32; LEARNED_OUTPUTS]; 6] = [
+            [3_219_324_328, 3_141_803_687, 3_221_954_280],
+            [3_196_796_974, 999_787_904, 3_206_193_346],
+            [1_069_526_156, 983_716_112, 1_069_160_318],
+            [1_040_652_244, 989_239_366, 3_180_020_950],
+            [1_067_158_079, 1_007_828_347, 1_068_686_387],
+            [1_063_376_614, 1_006_014_152, 1_060_188_798],
+        ];
+        let model = Learned::from_bytes(include_bytes!("../../../tests/data/learned/model.bin")).unwrap();
+        let got: Vec<[u32; LEARNED_OUTPUTS]> = (0..PINNED.len())
+            .map(|i| model.forward(&learned_input(&features(0.3 + 0.71 * i as f64))).map(|v| (v as f32).to_bits()))
+            .collect();
+        assert_eq!(got, PINNED, "{got:?}");
     }
 
     #[test]

@@ -14,11 +14,36 @@ use std::sync::LazyLock;
 /// Widest hidden layer the forward pass's stack arrays hold.
 pub(super) const MAX_WIDTH: usize = 64;
 
+/// Lanes of the widest vector (AVX-512: 16 `f32`). Every weight row and bias is
+/// zero-padded to a multiple of it ([`pad_rows`]), so a layer is whole vectors at any
+/// width the CPU has: no scalar tail (the 3 outputs are lanes of one vector).
+pub(super) const PAD: usize = 16;
+
+/// Most output vectors a layer sums together, each in its own register: their
+/// chains of dependent adds overlap instead of running one after another.
+const REGISTERS: usize = 8;
+
+/// `n` rounded up to a multiple of [`PAD`]: a padded row's length.
+pub(super) const fn padded(n: usize) -> usize {
+    n.next_multiple_of(PAD)
+}
+
+/// A `rows × n` row-major matrix with each row zero-padded to [`padded`]`(n)`.
+pub(super) fn pad_rows(m: &[f32], n: usize) -> Vec<f32> {
+    let stride = padded(n);
+    let mut out = vec![0f32; m.len() / n.max(1) * stride];
+    for (dst, src) in out.chunks_exact_mut(stride).zip(m.chunks_exact(n.max(1))) {
+        dst[..n].copy_from_slice(src);
+    }
+    out
+}
+
 /// The instruction set the forward pass runs with, detected once.
 static ARCH: LazyLock<Arch> = LazyLock::new(Arch::new);
 
-/// A network's weights, each matrix input-major: row i holds the weights of input i
-/// to every output, so a layer sums scaled contiguous rows (no horizontal sums).
+/// A network's weights, each matrix input-major with rows padded by [`pad_rows`]
+/// (row i holds the weights of input i to every output, so a layer sums scaled
+/// contiguous rows: no horizontal sums), each bias padded the same way.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Layers<'a, const I: usize, const O: usize> {
     /// Hidden width (≤ [`MAX_WIDTH`]).
@@ -49,60 +74,71 @@ impl<const I: usize, const O: usize> WithSimd for Forward<'_, '_, I, O> {
 
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) -> [f32; O] {
+        const { assert!(O <= PAD) };
         let l = self.layers;
         let h = l.hidden;
         let mut h1 = [0f32; MAX_WIDTH];
-        layer(simd, self.x, l.t1, l.b1, &mut h1[..h]);
-        tanh_all(simd, &mut h1[..h]);
+        layer(simd, self.x, l.t1, l.b1, &mut h1, h);
+        tanh_all(simd, &mut h1[..padded(h)]);
         let mut h2 = [0f32; MAX_WIDTH];
-        layer(simd, &h1[..h], l.t2, l.b2, &mut h2[..h]);
-        tanh_all(simd, &mut h2[..h]);
-        let mut out = [0f32; O];
-        layer(simd, &h2[..h], l.t3, l.b3, &mut out);
-        out
+        layer(simd, &h1[..h], l.t2, l.b2, &mut h2, h);
+        tanh_all(simd, &mut h2[..padded(h)]);
+        let mut out = [0f32; PAD];
+        layer(simd, &h2[..h], l.t3, l.b3, &mut out, O);
+        std::array::from_fn(|k| out[k])
     }
 }
 
-/// Output vectors summed together: their sums stay in registers across the inputs.
-const REGISTERS: usize = 4;
-
-/// `out = bias + Σᵢ input[i] · wt[i·n ..][..n]`, each output summed in input order.
+/// `out[j] = bias[j] + Σᵢ input[i] · wt[i·padded(n) + j]` for j < n, each output
+/// summed in input order. `wt` and `bias` are padded ([`pad_rows`]); `out` has room
+/// for `padded(n)` values, and the lanes past `n` get the padding's sums.
 #[inline(always)]
-pub(super) fn layer<S: Simd>(simd: S, input: &[f32], wt: &[f32], bias: &[f32], out: &mut [f32]) {
-    let n = out.len();
+pub(super) fn layer<S: Simd>(simd: S, input: &[f32], wt: &[f32], bias: &[f32], out: &mut [f32], n: usize) {
+    let stride = padded(n);
     let lanes = S::F32_LANES;
+    debug_assert!(PAD.is_multiple_of(lanes) && wt.len() >= input.len() * stride && bias.len() >= stride);
+    let rows = &wt[..input.len() * stride];
+    let mut vectors = n.div_ceil(lanes);
     let mut j = 0;
-    // Blocks of REGISTERS vectors, then of one vector, then single outputs.
-    while j + REGISTERS * lanes <= n {
-        let (b, _) = S::as_simd_f32s(&bias[j..j + REGISTERS * lanes]);
-        let mut acc: [S::f32s; REGISTERS] = std::array::from_fn(|k| b[k]);
-        for (x, row) in input.iter().zip(wt.chunks_exact(n)) {
-            let xs = simd.splat_f32s(*x);
-            let (w, _) = S::as_simd_f32s(&row[j..j + REGISTERS * lanes]);
-            for k in 0..REGISTERS {
-                acc[k] = simd.add_f32s(acc[k], simd.mul_f32s(w[k], xs));
-            }
-        }
-        let (o, _) = S::as_mut_simd_f32s(&mut out[j..j + REGISTERS * lanes]);
-        o.copy_from_slice(&acc);
+    while vectors >= REGISTERS {
+        block::<S, REGISTERS>(simd, input, rows, stride, j, bias, out);
         j += REGISTERS * lanes;
+        vectors -= REGISTERS;
     }
-    while j + lanes <= n {
-        let (b, _) = S::as_simd_f32s(&bias[j..j + lanes]);
-        let mut acc = b[0];
-        for (x, row) in input.iter().zip(wt.chunks_exact(n)) {
-            let (w, _) = S::as_simd_f32s(&row[j..j + lanes]);
-            acc = simd.add_f32s(acc, simd.mul_f32s(w[0], simd.splat_f32s(*x)));
+    match vectors {
+        0 => {}
+        1 => block::<S, 1>(simd, input, rows, stride, j, bias, out),
+        2 => block::<S, 2>(simd, input, rows, stride, j, bias, out),
+        3 => block::<S, 3>(simd, input, rows, stride, j, bias, out),
+        4 => block::<S, 4>(simd, input, rows, stride, j, bias, out),
+        5 => block::<S, 5>(simd, input, rows, stride, j, bias, out),
+        6 => block::<S, 6>(simd, input, rows, stride, j, bias, out),
+        _ => block::<S, 7>(simd, input, rows, stride, j, bias, out),
+    }
+}
+
+/// The `K` output vectors from column `j` on, summed together: one register each.
+#[inline(always)]
+fn block<S: Simd, const K: usize>(
+    simd: S,
+    input: &[f32],
+    rows: &[f32],
+    stride: usize,
+    j: usize,
+    bias: &[f32],
+    out: &mut [f32],
+) {
+    let columns = j..j + K * S::F32_LANES;
+    let (b, _) = S::as_simd_f32s(&bias[columns.clone()]);
+    let mut acc: [S::f32s; K] = std::array::from_fn(|k| b[k]);
+    for (x, row) in input.iter().zip(rows.chunks_exact(stride)) {
+        let xs = simd.splat_f32s(*x);
+        let (w, _) = S::as_simd_f32s(&row[columns.clone()]);
+        for k in 0..K {
+            acc[k] = simd.add_f32s(acc[k], simd.mul_f32s(w[k], xs));
         }
-        S::as_mut_simd_f32s(&mut out[j..j + lanes]).0[0] = acc;
-        j += lanes;
     }
-    for (k, o) in out.iter_mut().enumerate().skip(j) {
-        *o = bias[k];
-        for (x, row) in input.iter().zip(wt.chunks_exact(n)) {
-            *o += row[k] * x;
-        }
-    }
+    S::as_mut_simd_f32s(&mut out[columns]).0.copy_from_slice(&acc);
 }
 
 /// [`fast_tanh`] of every value, a vector at a time.
@@ -186,8 +222,14 @@ mod tests {
     impl WithSimd for Layer<'_> {
         type Output = ();
         fn with_simd<S: Simd>(self, simd: S) {
-            layer(simd, self.input, self.wt, self.bias, self.out);
-            tanh_all(simd, self.out);
+            // The padded layer, as `Learned` stores it.
+            let n = self.out.len();
+            let wt = pad_rows(self.wt, n);
+            let bias = pad_rows(self.bias, n);
+            let mut out = vec![f32::NAN; padded(n)];
+            layer(simd, self.input, &wt, &bias, &mut out, n);
+            tanh_all(simd, &mut out);
+            self.out.copy_from_slice(&out[..n]);
         }
     }
 
