@@ -141,7 +141,7 @@ impl World {
 
     pub(crate) fn sight_fan_padded(&self, marker: &Point3<f64>, radius: f64, range: f64, pad: FanPad) -> SightFan {
         let (mx, my) = (marker.x, marker.y);
-        let mut listed: Vec<(Entry, std::ops::Range<usize>)> = Vec::new();
+        let mut listed: Vec<(Entry, std::ops::Range<usize>)> = Vec::with_capacity(self.leaves.len());
         let width = 2.0 * PI / BUCKETS as f64;
         let widen = if pad.widen { width } else { 0.0 };
         for (i, leaf) in self.leaves.iter().enumerate() {
@@ -179,26 +179,35 @@ impl World {
             let count = (last + BUCKETS - first) % BUCKETS + 1;
             listed.push((entry, first..first + count));
         }
-        let mut per_bucket: Vec<Vec<Entry>> = vec![Vec::new(); BUCKETS];
+        // The buckets laid out in one array: count, then place, then sort each bucket
+        // in place (the order is total: no two entries of a bucket share a leaf).
+        let mut starts = vec![0u32; BUCKETS + 1];
         let mut close = Vec::new();
         for (entry, buckets) in &listed {
             for b in buckets.clone() {
-                per_bucket[b % BUCKETS].push(*entry);
+                starts[b % BUCKETS + 1] += 1;
             }
             if entry.from <= CLOSE || entry.from.is_nan() {
                 close.push(*entry);
             }
         }
-        let nearest_first = |a: &Entry, b: &Entry| a.from.total_cmp(&b.from).then(a.leaf.cmp(&b.leaf));
-        close.sort_by(nearest_first);
-        let mut starts = Vec::with_capacity(BUCKETS + 1);
-        let mut entries = Vec::new();
-        for mut list in per_bucket {
-            starts.push(entries.len() as u32);
-            list.sort_by(nearest_first);
-            entries.extend(list);
+        for b in 0..BUCKETS {
+            starts[b + 1] += starts[b];
         }
-        starts.push(entries.len() as u32);
+        let mut next: Vec<u32> = starts[..BUCKETS].to_vec();
+        let mut entries = vec![Entry { from: 0.0, leaf: 0 }; starts[BUCKETS] as usize];
+        for (entry, buckets) in &listed {
+            for b in buckets.clone() {
+                let at = &mut next[b % BUCKETS];
+                entries[*at as usize] = *entry;
+                *at += 1;
+            }
+        }
+        let nearest_first = |a: &Entry, b: &Entry| a.from.total_cmp(&b.from).then(a.leaf.cmp(&b.leaf));
+        close.sort_unstable_by(nearest_first);
+        for b in 0..BUCKETS {
+            entries[starts[b] as usize..starts[b + 1] as usize].sort_unstable_by(nearest_first);
+        }
         SightFan { x: mx, y: my, z: marker.z, radius, range, starts, entries, close }
     }
 
