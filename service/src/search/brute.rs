@@ -175,6 +175,12 @@ impl<'p> Kept<'p> {
     }
 }
 
+/// `span` grown to hold the box `(lo, hi)`.
+#[inline]
+fn grow(span: &mut Option<(Point3<f64>, Point3<f64>)>, (lo, hi): (Point3<f64>, Point3<f64>)) {
+    *span = Some(span.map_or((lo, hi), |(l, h)| (l.inf(&lo), h.sup(&hi))));
+}
+
 /// One thread's reusable buffers (sized once, so no allocation per point).
 struct Row {
     poses: Vec<SensorPose>,
@@ -279,11 +285,9 @@ impl Brute {
                 let pose = lupp.rig().pose_from(&target, rho, direction, frame);
                 // A viewer outside the workspace fails before its star is checked.
                 if lupp.in_workspace(&pose.viewer_position) {
-                    let (lo, hi) = lupp.collision_box(&pose);
-                    span = Some(span.map_or((lo, hi), |(l, h)| (l.inf(&lo), h.sup(&hi))));
+                    grow(&mut span, lupp.collision_box(&pose));
                     if voxels {
-                        let (lo, hi) = lupp.sight_box(&pose);
-                        sight_span = Some(sight_span.map_or((lo, hi), |(l, h)| (l.inf(&lo), h.sup(&hi))));
+                        grow(&mut sight_span, lupp.sight_box(&pose));
                     }
                 }
                 row.poses.push(pose);
