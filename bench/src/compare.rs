@@ -391,6 +391,24 @@ impl Drop for BuildDaemon {
     }
 }
 
+/// One build as the comparison asks it ([`Through`]).
+enum Build {
+    /// Its `dyfos`, one `dyfos solve` per query.
+    Solve(PathBuf),
+    /// Its running daemon.
+    Daemon(BuildDaemon),
+}
+
+impl Build {
+    /// The build's answer to `case`; `threads` for `dyfos solve` (a daemon uses its workers).
+    fn answer(&self, case: &Case, algorithm: Algorithm, seed: u64, threads: usize) -> anyhow::Result<SolveRun> {
+        match self {
+            Build::Solve(dyfos) => solve_once(dyfos, case, algorithm, seed, threads),
+            Build::Daemon(daemon) => query_once(daemon, case, algorithm, seed),
+        }
+    }
+}
+
 /// Runs `dyfos solve` of `dyfos` on `case` and reads its answer.
 pub fn solve_once(
     dyfos: &Path,
@@ -549,18 +567,17 @@ pub fn compare(
     mut progress: impl FnMut(&str),
 ) -> anyhow::Result<Comparison> {
     let (a, b) = (dyfos_in(baseline_dir)?, dyfos_in(new_dir)?);
-    let daemons = match config.through {
-        Through::Solve => None,
-        Through::Daemon => {
-            let model = cases.iter().find_map(|c| c.model_file.as_deref());
-            progress("starting both builds' dyfosd");
-            Some((BuildDaemon::start(&a, "base", model)?, BuildDaemon::start(&b, "new", model)?))
-        }
+    let model = cases.iter().find_map(|c| c.model_file.as_deref());
+    let mut build = |dyfos: PathBuf, tag: &str| -> anyhow::Result<Build> {
+        Ok(match config.through {
+            Through::Solve => Build::Solve(dyfos),
+            Through::Daemon => {
+                progress(&format!("starting the {tag} build's dyfosd"));
+                Build::Daemon(BuildDaemon::start(&dyfos, tag, model)?)
+            }
+        })
     };
-    let run = |dyfos: &Path, daemon: Option<&BuildDaemon>, case: &Case, algorithm: Algorithm, seed: u64| match daemon {
-        Some(daemon) => query_once(daemon, case, algorithm, seed),
-        None => solve_once(dyfos, case, algorithm, seed, config.threads),
-    };
+    let (a, b) = (build(a, "base")?, build(b, "new")?);
     let mut queries = Vec::new();
     for case in cases {
         for &algorithm in &config.algorithms {
@@ -584,8 +601,8 @@ pub fn compare(
     for round in 0..config.rounds.max(1) {
         progress(&format!("round {}/{}: {} queries on each build", round + 1, config.rounds.max(1), queries.len()));
         for (case, algorithm, runs) in &mut queries {
-            runs.baseline.push(run(&a, daemons.as_ref().map(|d| &d.0), case, *algorithm, runs.seed)?);
-            runs.new.push(run(&b, daemons.as_ref().map(|d| &d.1), case, *algorithm, runs.seed)?);
+            runs.baseline.push(a.answer(case, *algorithm, runs.seed, config.threads)?);
+            runs.new.push(b.answer(case, *algorithm, runs.seed, config.threads)?);
         }
     }
     let queries: Vec<QueryRuns> = queries.into_iter().map(|(_, _, q)| q).collect();
@@ -670,19 +687,15 @@ impl Comparison {
             );
         }
         let differing: usize = self.groups.iter().map(|g| g.differing).sum();
+        let via = match self.through {
+            Through::Solve => format!("`dyfos solve` --threads {}", self.threads),
+            Through::Daemon => "each build's `dyfosd`".to_string(),
+        };
         let _ = writeln!(
             out,
-            "\n{} queries, {} rounds, through {}{}: {}",
+            "\n{} queries, {} rounds, through {via}: {}",
             self.queries.len(),
             self.rounds,
-            match self.through {
-                Through::Solve => "`dyfos solve`",
-                Through::Daemon => "each build's `dyfosd`",
-            },
-            match self.through {
-                Through::Solve => format!(" --threads {}", self.threads),
-                Through::Daemon => String::new(),
-            },
             if differing == 0 { "every answer identical".to_string() } else { format!("{differing} queries DIFFER") }
         );
         out
