@@ -551,6 +551,8 @@ pub struct Comparison {
     pub floors: Vec<(Model, f64)>,
     /// One line per group.
     pub groups: Vec<GroupRow>,
+    /// Voxel and OctoMap maps against the cylinder maps, per build.
+    pub against_cylinders: Vec<AgainstCylinders>,
     /// Every query's runs.
     pub queries: Vec<QueryRuns>,
 }
@@ -618,6 +620,7 @@ pub fn compare(
             group_row(&algorithm, kind, model, &members, floors.iter().find(|f| f.0 == model).map(|f| f.1))
         })
         .collect();
+    let against_cylinders = against_cylinders(&queries);
     Ok(Comparison {
         baseline: baseline_dir.to_path_buf(),
         new: new_dir.to_path_buf(),
@@ -626,8 +629,80 @@ pub fn compare(
         through: config.through,
         floors: floors.to_vec(),
         groups,
+        against_cylinders,
         queries,
     })
+}
+
+/// What a query on a voxel or OctoMap map costs against one on a cylinder map, in
+/// each build: the measure of "an OctoMap map as cheap as cylinders".
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct AgainstCylinders {
+    /// Algorithm name.
+    pub algorithm: String,
+    /// Model.
+    pub model: Model,
+    /// The voxel or OctoMap kind.
+    pub kind: MapKind,
+    /// Queries compared.
+    pub queries: usize,
+    /// The baseline's median ratio of `micros` (> 1: dearer than cylinders).
+    pub baseline: f64,
+    /// The same for this build.
+    pub new: f64,
+}
+
+/// Per algorithm, model and voxel or OctoMap kind: a [`MapKind::Voxels`] query
+/// against the same SPEC map as cylinders (`voxels_03` against `numerical_03`, same
+/// seed), the median of those ratios; an OctoMap query against the median of the
+/// SPEC maps' queries with its seed (there is no same scene in cylinders), the median
+/// over its queries. Each query's time is its median over the rounds.
+pub fn against_cylinders(queries: &[QueryRuns]) -> Vec<AgainstCylinders> {
+    // The SPEC maps' queries asked as `q` is (algorithm, model, seed).
+    fn cylinders<'a>(queries: &'a [QueryRuns], q: &'a QueryRuns) -> impl Iterator<Item = &'a QueryRuns> {
+        queries.iter().filter(move |c| {
+            c.kind == MapKind::Numerical && c.algorithm == q.algorithm && c.model == q.model && c.seed == q.seed
+        })
+    }
+    let ratios = |q: &QueryRuns, pick: fn(&QueryRuns) -> &[SolveRun]| -> Option<f64> {
+        let on_cylinders = match q.kind {
+            MapKind::Voxels => {
+                let same = q.name.strip_prefix("voxels_")?;
+                median_micros(pick(cylinders(queries, q).find(|c| c.name.strip_prefix("numerical_") == Some(same))?))
+            }
+            _ => median(
+                &mut cylinders(queries, q)
+                    .map(|c| median_micros(pick(c)))
+                    .filter(|m| m.is_finite())
+                    .collect::<Vec<_>>(),
+            ),
+        };
+        let ratio = median_micros(pick(q)) / on_cylinders;
+        ratio.is_finite().then_some(ratio)
+    };
+    let mut keys: Vec<(String, Model, MapKind)> = queries
+        .iter()
+        .filter(|q| matches!(q.kind, MapKind::Voxels | MapKind::Octomap | MapKind::Building))
+        .map(|q| (q.algorithm.clone(), q.model, q.kind))
+        .collect();
+    keys.sort();
+    keys.dedup();
+    keys.into_iter()
+        .filter_map(|(algorithm, model, kind)| {
+            let members: Vec<&QueryRuns> =
+                queries.iter().filter(|q| q.algorithm == algorithm && q.model == model && q.kind == kind).collect();
+            let mut base: Vec<f64> = members.iter().filter_map(|q| ratios(q, |q| &q.baseline)).collect();
+            let mut new: Vec<f64> = members.iter().filter_map(|q| ratios(q, |q| &q.new)).collect();
+            (!new.is_empty()).then(|| AgainstCylinders {
+                algorithm,
+                model,
+                kind,
+                queries: new.len(),
+                baseline: median(&mut base),
+                new: median(&mut new),
+            })
+        })
+        .collect()
 }
 
 fn group_row(algorithm: &str, kind: MapKind, model: Model, members: &[&QueryRuns], floor: Option<f64>) -> GroupRow {
@@ -698,6 +773,18 @@ impl Comparison {
             self.rounds,
             if differing == 0 { "every answer identical".to_string() } else { format!("{differing} queries DIFFER") }
         );
+        if !self.against_cylinders.is_empty() {
+            let _ = writeln!(
+                out,
+                "\nAgainst the cylinder maps (median `micros` ratio; voxels: each map against the same SPEC map as cylinders):\n"
+            );
+            let columns = [("algorithm", l), ("maps", l), ("model", l), ("queries", r), ("baseline", r), ("new", r)];
+            table::header(&mut out, &columns);
+            for a in &self.against_cylinders {
+                let cells = [a.algorithm.clone(), a.kind.name().into(), a.model.name().into(), a.queries.to_string()];
+                table::row(&mut out, &[&cells[..], &[a.baseline, a.new].map(|v| format!("{v:.2}"))].concat());
+            }
+        }
         out
     }
 }
@@ -769,6 +856,33 @@ mod tests {
         assert_eq!((row.baseline_micros, row.new_micros, row.ratio), (200.0, 100.0, 2.0));
         // 100 µs over 10 evaluations × 2 µs.
         assert_eq!(row.new_floor_multiple, Some(5.0));
+    }
+
+    #[test]
+    fn voxel_maps_are_set_against_the_same_maps_as_cylinders() {
+        let q = |name: &str, kind, base: f64, new: f64| QueryRuns {
+            name: name.into(),
+            kind,
+            baseline: vec![run(base, -3.0)],
+            new: vec![run(new, -3.0)],
+            ..query(vec![], vec![])
+        };
+        let all = [
+            q("numerical_00", MapKind::Numerical, 100.0, 50.0),
+            q("numerical_01", MapKind::Numerical, 400.0, 200.0),
+            q("numerical_02", MapKind::Numerical, 300.0, 100.0),
+            q("voxels_00", MapKind::Voxels, 300.0, 100.0),
+            q("voxels_01", MapKind::Voxels, 400.0, 300.0),
+            q("geb079", MapKind::Octomap, 600.0, 150.0),
+        ];
+        let got = against_cylinders(&all);
+        assert_eq!(got.len(), 2, "{got:?}");
+        let voxels = got.iter().find(|a| a.kind == MapKind::Voxels).unwrap();
+        // Pairs by map: 300/100 and 400/400 against 100/50 and 300/200, not the medians' 350/300.
+        assert_eq!((voxels.queries, voxels.baseline, voxels.new), (2, 2.0, 1.75));
+        let octomap = got.iter().find(|a| a.kind == MapKind::Octomap).unwrap();
+        // Against the SPEC maps' median: 300 µs and 100 µs.
+        assert_eq!((octomap.baseline, octomap.new), (2.0, 1.5));
     }
 
     #[test]
