@@ -106,6 +106,19 @@ pub struct Prediction {
     pub posterior: Matrix3<f64>,
 }
 
+/// What a search that makes poses from parts knows about one before it is
+/// evaluated ([`Lupp::evaluate_pose_below`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseFacts {
+    /// [`Lupp::in_workspace`] of its viewer.
+    pub in_workspace: bool,
+    /// `viewer_yaw.sin_cos()`, for its collision star's segments.
+    pub turn: (f64, f64),
+    /// Whether nothing solid is near its sight lines, as proved by e.g.
+    /// [`World::box_is_clear`] on a box holding [`Lupp::sight_box`]: they are skipped.
+    pub sight_clear: bool,
+}
+
 /// Occlusion segments are tested in batches of this many, on the stack.
 const SIGHT_BATCH: usize = 16;
 
@@ -225,19 +238,29 @@ impl<'a> Lupp<'a> {
         Evaluation::Feasible { cost: self.prior.cost(&self.noise(pose)) }
     }
 
-    /// [`Lupp::evaluate_pose`] for a search that only wants costs below `bound`
-    /// ([`Prior::cost_bound`] of [`Lupp::prior`]): the same verdict, and the same
-    /// cost bit for bit, but that a feasible candidate whose cost is sure to be at
-    /// least the bound reports +∞ (its logarithms are not taken).
+    /// [`Lupp::evaluate_pose`] for a search that knows `facts` of the pose and
+    /// only wants costs below `bound` ([`Prior::cost_bound`] of [`Lupp::prior`]):
+    /// the same verdict, and the same cost bit for bit, but that a feasible
+    /// candidate whose cost is sure to be at least the bound reports +∞ (its
+    /// logarithms are not taken).
     #[inline]
     pub fn evaluate_pose_below(
         &self,
         pose: &SensorPose,
+        facts: &PoseFacts,
         near: &Nearby,
-        sight_clear: bool,
         bound: &CostBound,
     ) -> Evaluation {
-        if let Some(why) = self.first_violation(pose, near, sight_clear) {
+        let why = if !facts.in_workspace {
+            Some(Violation::Workspace)
+        } else if self.world.star_contact_near_turned(near, &self.star(pose), facts.turn) {
+            Some(Violation::Collision)
+        } else if self.occluded(pose, facts.sight_clear) {
+            Some(Violation::Occlusion)
+        } else {
+            None
+        };
+        if let Some(why) = why {
             return Evaluation::Rejected(why);
         }
         Evaluation::Feasible { cost: self.prior.cost_below(&self.noise(pose), bound).unwrap_or(f64::INFINITY) }
@@ -288,8 +311,15 @@ impl<'a> Lupp<'a> {
         if self.world.star_contact_near(near, &self.star(pose)) {
             return Some(Violation::Collision);
         }
+        self.occluded(pose, sight_clear).then_some(Violation::Occlusion)
+    }
+
+    /// Whether a sight line of `pose` is blocked (SPEC §5.3); `sight_clear` as in
+    /// [`Lupp::evaluate_pose`].
+    #[inline]
+    fn occluded(&self, pose: &SensorPose, sight_clear: bool) -> bool {
         if sight_clear || !self.fan.may_block(&pose.position) {
-            return None;
+            return false;
         }
         let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
         let (lo, hi) = self.sight_box(pose);
@@ -302,10 +332,10 @@ impl<'a> Lupp<'a> {
                 }
             }
             if self.world.any_sight_contact(&self.fan, &pose.position, &batch[..n], &lo, &hi) {
-                return Some(Violation::Occlusion);
+                return true;
             }
         }
-        None
+        false
     }
 
     /// The collision star of `pose` (SPEC §5.2).
