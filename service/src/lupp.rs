@@ -119,9 +119,6 @@ pub struct PoseFacts {
     pub sight_clear: bool,
 }
 
-/// Occlusion segments are tested in batches of this many, on the stack.
-const SIGHT_BATCH: usize = 16;
-
 /// The pipeline for one request: world, rendezvous belief, parameters and model,
 /// with everything that does not depend on the candidate precomputed.
 #[derive(Debug, Clone)]
@@ -318,24 +315,11 @@ impl<'a> Lupp<'a> {
     /// [`Lupp::evaluate_pose`].
     #[inline]
     fn occluded(&self, pose: &SensorPose, sight_clear: bool) -> bool {
-        if sight_clear || !self.fan.may_block(&pose.position) {
+        if sight_clear {
             return false;
         }
-        let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
         let (lo, hi) = self.sight_box(pose);
-        for chunk in self.targets.chunks(SIGHT_BATCH) {
-            let mut n = 0;
-            for q in chunk {
-                if let Some(s) = Segment::sight_line(&pose.position, q, 1e-6) {
-                    batch[n] = s;
-                    n += 1;
-                }
-            }
-            if self.world.any_sight_contact(&self.fan, &pose.position, &batch[..n], &lo, &hi) {
-                return true;
-            }
-        }
-        false
+        self.world.any_sight_line_contact(&self.fan, &pose.position, &self.targets, 1e-6, &lo, &hi)
     }
 
     /// The collision star of `pose` (SPEC §5.2).

@@ -30,8 +30,11 @@
 //! Sensors farther than the fan's range fall back to [`World::any_contact`].
 
 use super::{Leaf, Segment, World};
-use crate::math::Point3;
+use crate::math::{Point3, Vector3};
 use std::f64::consts::PI;
+
+/// Sight lines made at once, on the stack ([`World::any_sight_line_contact`]).
+const SIGHT_BATCH: usize = 16;
 
 /// Azimuth buckets around the marker.
 const BUCKETS: usize = 128;
@@ -246,6 +249,130 @@ impl World {
     }
 }
 
+impl World {
+    /// [`World::any_sight_contact`] of the sight lines from `sensor` to each of
+    /// `targets` ([`Segment::sight_line`] with `margin`), with one lookup of the
+    /// fan, the lines made only once an obstacle listed for `sensor` is not ruled
+    /// out by its distances (most sensors: none is). The same exact tests on the
+    /// same segments, so the same verdict. `[lo, hi]` holds every line.
+    #[inline]
+    pub fn any_sight_line_contact(
+        &self,
+        fan: &SightFan,
+        sensor: &Point3<f64>,
+        targets: &[Point3<f64>],
+        margin: f64,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+    ) -> bool {
+        let Some((entries, l)) = fan.list(sensor).filter(|_| targets.len() <= SIGHT_BATCH) else {
+            return self.sight_lines_by_chunks(fan, sensor, targets, margin, lo, hi);
+        };
+        // The lines are made (out of line) only from the first obstacle that is
+        // not ruled out.
+        for (i, e) in entries.iter().enumerate() {
+            if e.from > l {
+                break;
+            }
+            if !self.sight_rules_out(fan, sensor, e.leaf, lo, hi) {
+                return self.sight_lines_touch(fan, sensor, targets, margin, &entries[i..], l, lo, hi);
+            }
+        }
+        false
+    }
+
+    /// Whether the fan's distances, or the grid's bricks, rule out that `leaf`
+    /// touches a sight line from `sensor`.
+    #[inline(always)]
+    fn sight_rules_out(
+        &self,
+        fan: &SightFan,
+        sensor: &Point3<f64>,
+        leaf: u32,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+    ) -> bool {
+        match self.leaves[leaf as usize] {
+            Leaf::Voxels => !self.voxels_may_touch(lo, hi),
+            Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } => fan.misses_cylinder(sensor, &c),
+            Leaf::Solid { shape: super::Obstacle::Box(b), .. } => fan.misses_box(sensor, &b),
+        }
+    }
+
+    /// The sight lines made, tested against `entries` up to the sensor's distance
+    /// `l` (the first is within it and not ruled out).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn sight_lines_touch(
+        &self,
+        fan: &SightFan,
+        sensor: &Point3<f64>,
+        targets: &[Point3<f64>],
+        margin: f64,
+        entries: &[Entry],
+        l: f64,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+    ) -> bool {
+        let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
+        let n = sight_lines(sensor, targets, margin, &mut batch);
+        let Some((first, rest)) = entries.split_first() else {
+            return false;
+        };
+        if self.leaf_touches(first.leaf, &batch[..n]) {
+            return true;
+        }
+        for e in rest {
+            if e.from > l {
+                break;
+            }
+            if !self.sight_rules_out(fan, sensor, e.leaf, lo, hi) && self.leaf_touches(e.leaf, &batch[..n]) {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// [`World::any_sight_line_contact`] where the fan cannot answer, or the
+    /// targets are more than a batch: a batch at a time.
+    #[cold]
+    #[inline(never)]
+    fn sight_lines_by_chunks(
+        &self,
+        fan: &SightFan,
+        sensor: &Point3<f64>,
+        targets: &[Point3<f64>],
+        margin: f64,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+    ) -> bool {
+        let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
+        targets.chunks(SIGHT_BATCH).any(|chunk| {
+            let n = sight_lines(sensor, chunk, margin, &mut batch);
+            self.any_sight_contact(fan, sensor, &batch[..n], lo, hi)
+        })
+    }
+}
+
+/// The sight lines from `sensor` to each of `targets` (at most a batch) written
+/// into `batch`; how many (a target at the sensor has none).
+#[inline]
+fn sight_lines(
+    sensor: &Point3<f64>,
+    targets: &[Point3<f64>],
+    margin: f64,
+    batch: &mut [Segment; SIGHT_BATCH],
+) -> usize {
+    let mut n = 0;
+    for q in targets {
+        if let Some(s) = Segment::sight_line(sensor, q, margin) {
+            batch[n] = s;
+            n += 1;
+        }
+    }
+    n
+}
+
 impl SightFan {
     /// Whether no sight line from `sensor` can touch `cylinder`, by the fan's
     /// reasoning for this one sensor: every sight line lies within the radius of
@@ -453,6 +580,8 @@ mod tests {
                 assert_eq!(world.any_contact(&segments), want);
                 let got = world.any_sight_contact(&fan, &sensor, &segments, &lo, &hi);
                 assert!(fan.may_block(&sensor) || !got);
+                let targets = targets(&marker, radius, theta);
+                assert_eq!(world.any_sight_line_contact(&fan, &sensor, &targets, 1e-6, &lo, &hi), got);
                 if got != want {
                     wrong += 1;
                     assert!(pad != FanPad::SAFE, "case {case}, sensor {sensor:?}, theta {theta}: {got} != {want}");
