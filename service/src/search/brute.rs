@@ -15,6 +15,11 @@
 //!   through the query's sight fan, as for any candidate, but on a map with a
 //!   voxel grid (listed in every direction of the fan) an arc whose sight lines
 //!   have nothing solid near ([`dyfos_shared::world::World::box_is_clear`]) skips them;
+//! - what the row knows of each point is passed on, not found again
+//!   ([`PoseFacts`]): whether its viewer is in the workspace, and its yaw's
+//!   `sin_cos` (computed once per search), with which most stars beside an
+//!   obstacle are decided by their segments' directions without the exact test
+//!   ([`dyfos_shared::world::World::star_contact_near_turned`]);
 //! - threads take blocks of rows from a shared counter (infeasible rows are cheap,
 //!   so fixed shares are unbalanced), and each keeps, per block, only the points
 //!   that could still be the answer (each new minimum of the block, within 1e-9 of
