@@ -106,8 +106,18 @@ pub struct Prediction {
     pub posterior: Matrix3<f64>,
 }
 
-/// Occlusion segments are tested in batches of this many, on the stack.
-const SIGHT_BATCH: usize = 16;
+/// What a search that makes poses from parts knows about one before it is
+/// evaluated ([`Lupp::evaluate_pose_below`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseFacts {
+    /// [`Lupp::in_workspace`] of its viewer.
+    pub in_workspace: bool,
+    /// `viewer_yaw.sin_cos()`, for its collision star's segments.
+    pub turn: (f64, f64),
+    /// Whether nothing solid is near its sight lines, as proved by e.g.
+    /// [`World::box_is_clear`] on a box holding [`Lupp::sight_box`]: they are skipped.
+    pub sight_clear: bool,
+}
 
 /// The pipeline for one request: world, rendezvous belief, parameters and model,
 /// with everything that does not depend on the candidate precomputed.
@@ -225,19 +235,29 @@ impl<'a> Lupp<'a> {
         Evaluation::Feasible { cost: self.prior.cost(&self.noise(pose)) }
     }
 
-    /// [`Lupp::evaluate_pose`] for a search that only wants costs below `bound`
-    /// ([`Prior::cost_bound`] of [`Lupp::prior`]): the same verdict, and the same
-    /// cost bit for bit, but that a feasible candidate whose cost is sure to be at
-    /// least the bound reports +∞ (its logarithms are not taken).
+    /// [`Lupp::evaluate_pose`] for a search that knows `facts` of the pose and
+    /// only wants costs below `bound` ([`Prior::cost_bound`] of [`Lupp::prior`]):
+    /// the same verdict, and the same cost bit for bit, but that a feasible
+    /// candidate whose cost is sure to be at least the bound reports +∞ (its
+    /// logarithms are not taken).
     #[inline]
     pub fn evaluate_pose_below(
         &self,
         pose: &SensorPose,
+        facts: &PoseFacts,
         near: &Nearby,
-        sight_clear: bool,
         bound: &CostBound,
     ) -> Evaluation {
-        if let Some(why) = self.first_violation(pose, near, sight_clear) {
+        let why = if !facts.in_workspace {
+            Some(Violation::Workspace)
+        } else if self.world.star_contact_near_turned(near, &self.star(pose), facts.turn) {
+            Some(Violation::Collision)
+        } else if self.occluded(pose, facts.sight_clear) {
+            Some(Violation::Occlusion)
+        } else {
+            None
+        };
+        if let Some(why) = why {
             return Evaluation::Rejected(why);
         }
         Evaluation::Feasible { cost: self.prior.cost_below(&self.noise(pose), bound).unwrap_or(f64::INFINITY) }
@@ -288,24 +308,18 @@ impl<'a> Lupp<'a> {
         if self.world.star_contact_near(near, &self.star(pose)) {
             return Some(Violation::Collision);
         }
-        if sight_clear || !self.fan.may_block(&pose.position) {
-            return None;
+        self.occluded(pose, sight_clear).then_some(Violation::Occlusion)
+    }
+
+    /// Whether a sight line of `pose` is blocked (SPEC §5.3); `sight_clear` as in
+    /// [`Lupp::evaluate_pose`].
+    #[inline]
+    fn occluded(&self, pose: &SensorPose, sight_clear: bool) -> bool {
+        if sight_clear {
+            return false;
         }
-        let mut batch = [Segment::closed(Point3::origin(), Vector3::x(), 0.0); SIGHT_BATCH];
         let (lo, hi) = self.sight_box(pose);
-        for chunk in self.targets.chunks(SIGHT_BATCH) {
-            let mut n = 0;
-            for q in chunk {
-                if let Some(s) = Segment::sight_line(&pose.position, q, 1e-6) {
-                    batch[n] = s;
-                    n += 1;
-                }
-            }
-            if self.world.any_sight_contact(&self.fan, &pose.position, &batch[..n], &lo, &hi) {
-                return Some(Violation::Occlusion);
-            }
-        }
-        None
+        self.world.any_sight_line_contact(&self.fan, &pose.position, &self.targets, 1e-6, &lo, &hi)
     }
 
     /// The collision star of `pose` (SPEC §5.2).

@@ -15,6 +15,11 @@
 //!   through the query's sight fan, as for any candidate, but on a map with a
 //!   voxel grid (listed in every direction of the fan) an arc whose sight lines
 //!   have nothing solid near ([`dyfos_shared::world::World::box_is_clear`]) skips them;
+//! - what the row knows of each point is passed on, not found again
+//!   ([`PoseFacts`]): whether its viewer is in the workspace, and its yaw's
+//!   `sin_cos` (computed once per search), with which most stars beside an
+//!   obstacle are decided by their segments' directions without the exact test
+//!   ([`dyfos_shared::world::World::star_contact_near_turned`]);
 //! - threads take blocks of rows from a shared counter (infeasible rows are cheap,
 //!   so fixed shares are unbalanced), and each keeps, per block, only the points
 //!   that could still be the answer (each new minimum of the block, within 1e-9 of
@@ -24,7 +29,7 @@
 //!   least that far up skips the cost's logarithms ([`Lupp::evaluate_pose_below`]).
 
 use super::{Evaluator, Found, Search, SearchControl, SearchOutcome};
-use crate::lupp::{Evaluation, Lupp};
+use crate::lupp::{Evaluation, Lupp, PoseFacts};
 use dyfos_shared::answer::{EvalStats, StopReason};
 use dyfos_shared::math::{Point3, Vector3};
 use dyfos_shared::posterior::{CostBound, Prior};
@@ -97,6 +102,8 @@ struct Plan {
     directions: Vec<Vector3<f64>>,
     /// Per yaw, with the yaw as [`Brute::point`] wraps it.
     frames: Vec<YawFrame>,
+    /// Per yaw, its `sin_cos()` (for the collision star's segments).
+    turns: Vec<(f64, f64)>,
 }
 
 impl Plan {
@@ -107,10 +114,11 @@ impl Plan {
         let psi: Vec<f64> = (0..np).map(|i| axis(s.lo[1], s.hi[1], i, np)).collect();
         let phi: Vec<f64> = (0..nf).map(|i| axis(s.lo[2], s.hi[2], i, nf)).collect();
         let directions = psi.iter().flat_map(|p| phi.iter().map(|f| SensorRig::direction(*p, *f))).collect();
-        let frames = (0..ny)
+        let frames: Vec<YawFrame> = (0..ny)
             .map(|k| lupp.rig().yaw_frame(SensorState::new(0.0, 0.0, 0.0, -PI + 2.0 * PI * k as f64 / ny as f64).yaw))
             .collect();
-        Plan { rho, psi, phi, directions, frames }
+        let turns = frames.iter().map(|f| f.yaw.sin_cos()).collect();
+        Plan { rho, psi, phi, directions, frames, turns }
     }
 }
 
@@ -183,7 +191,7 @@ fn grow(span: &mut Option<(Point3<f64>, Point3<f64>)>, (lo, hi): (Point3<f64>, P
 
 /// One thread's reusable buffers (sized once, so no allocation per point).
 struct Row {
-    poses: Vec<SensorPose>,
+    poses: Vec<(SensorPose, bool)>,
     near: Nearby,
 }
 
@@ -284,13 +292,14 @@ impl Brute {
             for frame in frames {
                 let pose = lupp.rig().pose_from(&target, rho, direction, frame);
                 // A viewer outside the workspace fails before its star is checked.
-                if lupp.in_workspace(&pose.viewer_position) {
+                let inside = lupp.in_workspace(&pose.viewer_position);
+                if inside {
                     grow(&mut span, lupp.collision_box(&pose));
                     if voxels {
                         grow(&mut sight_span, lupp.sight_box(&pose));
                     }
                 }
-                row.poses.push(pose);
+                row.poses.push((pose, inside));
             }
             let near = match span {
                 Some((lo, hi)) => {
@@ -302,9 +311,11 @@ impl Brute {
             // A voxel grid is listed in every direction of the sight fan: when
             // nothing solid is near the arc's sight lines, skip them all.
             let sight_clear = sight_span.is_some_and(|(lo, hi)| world.box_is_clear(&lo, &hi));
-            for (k, (pose, frame)) in row.poses.iter().zip(frames).enumerate() {
+            let turns = &plan.turns[a * ARC..];
+            for (k, ((pose, in_workspace), frame)) in row.poses.iter().zip(frames).enumerate() {
                 let x = SensorState { rho, psi, phi, yaw: frame.yaw };
-                match eval.evaluate_with(&x, |l| l.evaluate_pose_below(pose, near, sight_clear, &kept.bound)) {
+                let facts = PoseFacts { in_workspace: *in_workspace, turn: turns[k], sight_clear };
+                match eval.evaluate_with(&x, |l| l.evaluate_pose_below(pose, &facts, near, &kept.bound)) {
                     None => return false,
                     Some(Evaluation::Feasible { cost }) if !cost.is_nan() => kept.found(first + a * ARC + k, cost),
                     Some(_) => {}
