@@ -38,7 +38,7 @@ pub use nearby::Nearby;
 pub use obstacle::{AxisBox, Obstacle, ObstacleError, VerticalCylinder};
 pub use segment::{Segment, SegmentEnd};
 pub use star::Star;
-pub use voxels::{CellIndex, VoxelBlock, VoxelError, VoxelGrid};
+pub use voxels::{CellIndex, NearBricks, VoxelBlock, VoxelError, VoxelGrid};
 
 use crate::limits::{MAX_COORDINATE, MAX_OBSTACLES};
 use crate::math::{Point2, Point3, Vector3};
@@ -329,6 +329,12 @@ impl World {
     #[inline]
     fn voxels_may_touch(&self, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
         self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi))
+    }
+
+    /// [`World::voxels_may_touch`], settled by the query's bricks `near` where they can.
+    #[inline]
+    fn voxels_may_touch_near(&self, near: &NearBricks, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+        self.voxels.as_ref().is_some_and(|v| v.may_touch_box_near(near, lo, hi))
     }
 
     /// Whether any of `segments` touches leaf `leaf` up to its own end.

@@ -20,6 +20,7 @@
 
 mod bounds;
 mod cover;
+mod near;
 mod tree;
 mod walk;
 
@@ -27,6 +28,7 @@ use super::obstacle::{ObstacleError, finite};
 use super::segment::{Segment, clip_slab};
 use crate::limits::{MAX_OCCUPIED_VOXELS, MAX_VOXEL_BLOCKS_SPANNED, MAX_VOXEL_INDEX};
 use crate::math::{Point3, floor};
+pub use near::NearBricks;
 use tree::{Tree, TreeLimit};
 
 /// A cell index (i, j, k): the closed cube `origin + resolution·[i, i+1]×[j, j+1]×[k, k+1]`.
@@ -349,25 +351,36 @@ impl VoxelGrid {
 
     /// [`VoxelGrid::may_touch_box`] with at most `budget` node and brick lookups.
     fn may_touch_box_within(&self, lo: &Point3<f64>, hi: &Point3<f64>, budget: u32) -> bool {
+        match self.cells_near(lo, hi) {
+            Err(touch) => touch,
+            Ok((first, last)) => self.tree.any_in_box(first, last, budget) != Some(false),
+        }
+    }
+
+    /// The cells whose closed cubes may meet the closed box `[lo, hi]` (one more on
+    /// each side for rounding), cut to the occupied cells' box plus one, as
+    /// (first, last); or the answer of [`VoxelGrid::may_touch_box`] when that is
+    /// already known: `Err(false)` none, `Err(true)` a bound is not finite.
+    #[inline]
+    fn cells_near(&self, lo: &Point3<f64>, hi: &Point3<f64>) -> Result<(CellIndex, CellIndex), bool> {
         let Some((cells_lo, cells_end)) = self.tree.bounds() else {
-            return false;
+            return Err(false);
         };
         let mut first = [0i64; 3];
         let mut last = [0i64; 3];
         for a in 0..3 {
-            // Cells whose closed cube meets [lo, hi], one more on each side for rounding.
             let f = floor((lo[a] - self.origin[a]) / self.resolution) - 2.0;
             let l = floor((hi[a] - self.origin[a]) / self.resolution) + 1.0;
             if !(f.is_finite() && l.is_finite()) {
-                return true;
+                return Err(true);
             }
             first[a] = (f.max((cells_lo[a] - 1) as f64)) as i64;
             last[a] = (l.min(cells_end[a] as f64)) as i64;
             if first[a] > last[a] {
-                return false;
+                return Err(false);
             }
         }
-        self.tree.any_in_box(first, last, budget) != Some(false)
+        Ok((first, last))
     }
 
     /// The smallest `t ∈ [0, seg.length]` at which the segment touches an occupied
