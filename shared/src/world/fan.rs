@@ -249,7 +249,7 @@ impl World {
                 Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } if fan.misses_cylinder(sensor, &c) => continue,
                 _ => {}
             }
-            if self.leaf_touches(e.leaf, segments) {
+            if self.leaf_touches_near(e.leaf, segments, &fan.bricks) {
                 return true;
             }
         }

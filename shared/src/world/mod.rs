@@ -343,6 +343,18 @@ impl World {
         segments.iter().any(|s| self.leaf_contact(leaf, s).is_some_and(|t| s.reaches(t)))
     }
 
+    /// [`World::leaf_touches`] for segments of a query whose voxel bricks near them
+    /// are `near`: the same answer.
+    #[inline]
+    fn leaf_touches_near(&self, leaf: u32, segments: &[Segment], near: &NearBricks) -> bool {
+        match (&self.leaves[leaf as usize], &self.voxels) {
+            (Leaf::Voxels, Some(v)) => {
+                segments.iter().any(|s| v.first_contact_near(s, near).is_some_and(|t| s.reaches(t)))
+            }
+            _ => self.leaf_touches(leaf, segments),
+        }
+    }
+
     /// Whether any segment touches any obstacle or occupied voxel, each up to its own
     /// [`SegmentEnd`]. Stops at the first contact; allocates nothing.
     pub fn any_contact(&self, segments: &[Segment]) -> bool {

@@ -158,7 +158,7 @@ impl World {
                 None => {}
             }
             let batch = made.get_or_insert_with(|| (segments.take().expect("made once"))());
-            if self.leaf_touches(*leaf_id, batch.as_ref()) {
+            if self.leaf_touches_near(*leaf_id, batch.as_ref(), &near.bricks) {
                 return true;
             }
         }

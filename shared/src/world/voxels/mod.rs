@@ -386,12 +386,19 @@ impl VoxelGrid {
     /// The smallest `t ∈ [0, seg.length]` at which the segment touches an occupied
     /// closed cell, or `None`. The segment's `end` is not applied. Allocates nothing.
     pub fn first_contact(&self, seg: &Segment) -> Option<f64> {
-        self.first_contact_with(seg, true)
+        self.first_contact_with(seg, true, None)
+    }
+
+    /// [`VoxelGrid::first_contact`], the same answer bit for bit, for a segment of
+    /// a query whose bricks near it are `near`: a short segment among empty bricks
+    /// is settled by their bits.
+    pub fn first_contact_near(&self, seg: &Segment, near: &NearBricks) -> Option<f64> {
+        self.first_contact_with(seg, true, Some(near))
     }
 
     /// [`VoxelGrid::first_contact`], passing blocks by their cells' boxes or not
     /// (`boxes`): the same answer, bit for bit, either way.
-    fn first_contact_with(&self, seg: &Segment, boxes: bool) -> Option<f64> {
+    fn first_contact_with(&self, seg: &Segment, boxes: bool, near: Option<&NearBricks>) -> Option<f64> {
         let (lo, end) = self.tree.bounds()?;
         let (box_lo, box_hi) = self.aabb()?;
         let (mut t0, mut t1) = (0.0, seg.length.max(0.0));
@@ -404,7 +411,12 @@ impl VoxelGrid {
         // settled by a few lookups of its box, without a walk.
         if t1 - t0 < 16.0 * self.resolution {
             let (a, b) = (seg.point_at(t0), seg.point_at(t1));
-            if !self.may_touch_box_within(&a.inf(&b), &a.sup(&b), 16) {
+            let (lo, hi) = (a.inf(&b), a.sup(&b));
+            let touch = match near {
+                Some(near) => self.may_touch_box_near_within(near, &lo, &hi, 16),
+                None => self.may_touch_box_within(&lo, &hi, 16),
+            };
+            if !touch {
                 return None;
             }
         }

@@ -192,16 +192,29 @@ impl VoxelGrid {
     /// are all empty: `false` only when no occupied cell's closed cube meets the box.
     #[inline]
     pub fn may_touch_box_near(&self, near: &NearBricks, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+        self.may_touch_box_near_within(near, lo, hi, 512)
+    }
+
+    /// [`VoxelGrid::may_touch_box_near`] with at most `budget` node and brick
+    /// lookups in the tree.
+    #[inline]
+    pub(super) fn may_touch_box_near_within(
+        &self,
+        near: &NearBricks,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+        budget: u32,
+    ) -> bool {
         match near.cells(lo, hi) {
             Cells::None => false,
-            Cells::Outside => self.may_touch_box(lo, hi),
+            Cells::Outside => self.may_touch_box_within(lo, hi, budget),
             Cells::Within(first, last) => {
                 if near.all_empty(&first, &last) {
                     return false;
                 }
                 let base = near.lo.map(|v| v * SIDE);
                 let absolute = |c: CellIndex| std::array::from_fn(|a| c[a] + base[a]);
-                self.tree.any_in_box(absolute(first), absolute(last), 512) != Some(false)
+                self.tree.any_in_box(absolute(first), absolute(last), budget) != Some(false)
             }
         }
     }
