@@ -97,8 +97,7 @@ impl NearBricks {
         let mut u = [[0.0; 2]; 3];
         for a in 0..3 {
             u[a] = [(lo[a] - self.corner[a]) * self.per_cell - 2.0, (hi[a] - self.corner[a]) * self.per_cell + 1.0];
-            // Not `u0 > u1`: NaN fails.
-            if !(u[a][0] <= u[a][1]) {
+            if u[a][0].is_nan() || u[a][1].is_nan() || u[a][0] > u[a][1] {
                 return Cells::Outside;
             }
         }
