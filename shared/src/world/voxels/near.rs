@@ -223,6 +223,7 @@ impl VoxelGrid {
 mod tests {
     use super::*;
     use crate::math::Vector3;
+    use crate::world::Segment;
 
     /// A tiny deterministic generator (the shared crate does not depend on rand).
     struct Lcg(u64);
@@ -312,6 +313,71 @@ mod tests {
         let (wrong, settled, empty) = disagreements(false);
         assert_eq!(wrong, 0);
         assert!(settled > 3000 && settled * 2 > empty, "{settled} settled of {empty} empty: the test tests little");
+    }
+
+    /// Counts the segments whose first contact with the bricks near them differs
+    /// from the one without, bit for bit: short and long segments among columns
+    /// and a floor, along cells' faces, inside the region and leaving it; and the
+    /// hits and the short segments.
+    fn contact_disagreements(lose_bits: bool) -> (usize, usize, usize) {
+        let mut rng = Lcg(11);
+        let mut cells = Vec::new();
+        for _ in 0..20 {
+            let (x, y) = ((rng.next() * 200.0) as i64 - 100, (rng.next() * 200.0) as i64 - 100);
+            let (side, top) = ((rng.next() * 10.0) as i64 + 1, (rng.next() * 40.0) as i64 + 1);
+            for i in 0..side {
+                for j in 0..side {
+                    for k in 0..top {
+                        cells.push([x + i, y + j, k]);
+                    }
+                }
+            }
+        }
+        cells.extend((-100..100).flat_map(|i| (-100..100).map(move |j| [i, j, -1])).filter(|c| (c[0] * c[1]) % 7 != 0));
+        let grid = VoxelGrid::new(0.125, Point3::new(-1.0, 2.0, 0.0), cells).unwrap();
+        let marker = Point3::new(-1.0, 2.0, 0.3);
+        let around = Vector3::new(8.0, 8.0, 3.0);
+        let mut near = grid.near_bricks(&(marker - around), &(marker + around));
+        if lose_bits {
+            // The floor's layer said empty.
+            near.layers[0] = 0;
+        }
+        let (mut wrong, mut hits, mut short) = (0, 0, 0);
+        for i in 0..20_000 {
+            let a = marker
+                + Vector3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.3).component_mul(&around) * 2.2;
+            let length = if i % 2 == 0 { rng.next() * 2.0 } else { rng.next() * 12.0 };
+            let d = Vector3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5);
+            // Every third along a grid plane, on a cell's face.
+            let (a, d) = if i % 3 == 0 {
+                let snap = |v: f64| (v * 8.0).round() / 8.0;
+                (Point3::new(snap(a.x), snap(a.y), snap(a.z)), Vector3::new(d.x, d.y, 0.0))
+            } else {
+                (a, d)
+            };
+            let Some(seg) = Segment::sight_line(&a, &(a + d.normalize() * length), 1e-6) else { continue };
+            let want = grid.first_contact(&seg);
+            wrong += usize::from(grid.first_contact_near(&seg, &near).map(f64::to_bits) != want.map(f64::to_bits));
+            hits += usize::from(want.is_some());
+            short += usize::from(seg.length < 2.0);
+        }
+        (wrong, hits, short)
+    }
+
+    /// A segment's first contact is the same with the bricks near it and without.
+    #[test]
+    fn first_contact_near_is_first_contact() {
+        let (wrong, hits, short) = contact_disagreements(false);
+        assert_eq!(wrong, 0);
+        assert!(hits > 2000 && short > 5000, "{hits} hits, {short} short: the test tests little");
+    }
+
+    /// The test above can fail: with the floor's bits lost, short segments
+    /// touching the floor are said to touch nothing.
+    #[test]
+    fn first_contact_near_with_bits_lost_differs() {
+        let (wrong, _, _) = contact_disagreements(true);
+        assert!(wrong > 0, "no short segment settled by the floor's bits touches it");
     }
 
     /// The test above can fail: with a layer's bits lost, boxes there are called
