@@ -29,7 +29,7 @@
 //! could make it wrong) use the list of obstacles within reach of that disc instead.
 //! Sensors farther than the fan's range fall back to [`World::any_contact`].
 
-use super::{Leaf, Segment, World};
+use super::{Leaf, NearBricks, Segment, World};
 use crate::math::{Point3, Vector3};
 use std::f64::consts::PI;
 
@@ -84,6 +84,8 @@ pub struct SightFan {
     entries: Vec<Entry>,
     /// The obstacles within reach of a sensor within `CLOSE` of the marker.
     close: Vec<Entry>,
+    /// The voxel grid's bricks near every sight line the fan serves.
+    bricks: NearBricks,
 }
 
 /// Where an azimuth falls in [0, 4): a pseudo-angle (the "diamond angle"), monotone
@@ -211,7 +213,17 @@ impl World {
         for b in 0..BUCKETS {
             entries[starts[b] as usize..starts[b + 1] as usize].sort_unstable_by(nearest_first);
         }
-        SightFan { x: mx, y: my, z: marker.z, radius, range, starts, entries, close }
+        // Every sight line the fan serves lies within range + radius of the marker in
+        // xy, padded as the footprints are; at any height within the grid.
+        let bricks = match self.voxels.as_ref().and_then(|v| v.aabb().map(|b| (v, b))) {
+            Some((v, (lo, hi))) => {
+                let reach = range + radius;
+                let reach = reach + pad.absolute.abs() + pad.relative.abs() * reach + 1e-6 * reach;
+                v.near_bricks(&Point3::new(mx - reach, my - reach, lo.z), &Point3::new(mx + reach, my + reach, hi.z))
+            }
+            None => NearBricks::default(),
+        };
+        SightFan { x: mx, y: my, z: marker.z, radius, range, starts, entries, close, bricks }
     }
 
     /// Whether any of `segments`, the sight lines from `sensor` to targets within the
@@ -236,12 +248,12 @@ impl World {
                 break;
             }
             match self.leaves[e.leaf as usize] {
-                Leaf::Voxels if !self.voxels_may_touch(lo, hi) => continue,
+                Leaf::Voxels if !self.voxels_may_touch_near(&fan.bricks, lo, hi) => continue,
                 Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } if fan.misses_cylinder(sensor, &c) => continue,
                 Leaf::Solid { shape: super::Obstacle::Box(b), .. } if fan.misses_box(sensor, &b) => continue,
                 _ => {}
             }
-            if self.leaf_touches(e.leaf, segments) {
+            if self.leaf_touches_near(e.leaf, segments, &fan.bricks) {
                 return true;
             }
         }
@@ -293,7 +305,7 @@ impl World {
         hi: &Point3<f64>,
     ) -> bool {
         match self.leaves[leaf as usize] {
-            Leaf::Voxels => !self.voxels_may_touch(lo, hi),
+            Leaf::Voxels => !self.voxels_may_touch_near(&fan.bricks, lo, hi),
             Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } => fan.misses_cylinder(sensor, &c),
             Leaf::Solid { shape: super::Obstacle::Box(b), .. } => fan.misses_box(sensor, &b),
         }
@@ -319,14 +331,16 @@ impl World {
         let Some((first, rest)) = entries.split_first() else {
             return false;
         };
-        if self.leaf_touches(first.leaf, &batch[..n]) {
+        if self.leaf_touches_near(first.leaf, &batch[..n], &fan.bricks) {
             return true;
         }
         for e in rest {
             if e.from > l {
                 break;
             }
-            if !self.sight_rules_out(fan, sensor, e.leaf, lo, hi) && self.leaf_touches(e.leaf, &batch[..n]) {
+            if !self.sight_rules_out(fan, sensor, e.leaf, lo, hi)
+                && self.leaf_touches_near(e.leaf, &batch[..n], &fan.bricks)
+            {
                 return true;
             }
         }

@@ -38,7 +38,7 @@ pub use nearby::Nearby;
 pub use obstacle::{AxisBox, Obstacle, ObstacleError, VerticalCylinder};
 pub use segment::{Segment, SegmentEnd};
 pub use star::Star;
-pub use voxels::{CellIndex, VoxelBlock, VoxelError, VoxelGrid};
+pub use voxels::{CellIndex, NearBricks, VoxelBlock, VoxelError, VoxelGrid};
 
 use crate::limits::{MAX_COORDINATE, MAX_OBSTACLES};
 use crate::math::{Point2, Point3, Vector3};
@@ -331,10 +331,28 @@ impl World {
         self.voxels.as_ref().is_some_and(|v| v.may_touch_box(lo, hi))
     }
 
+    /// [`World::voxels_may_touch`], settled by the query's bricks `near` where they can.
+    #[inline]
+    fn voxels_may_touch_near(&self, near: &NearBricks, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+        self.voxels.as_ref().is_some_and(|v| v.may_touch_box_near(near, lo, hi))
+    }
+
     /// Whether any of `segments` touches leaf `leaf` up to its own end.
     #[inline]
     fn leaf_touches(&self, leaf: u32, segments: &[Segment]) -> bool {
         segments.iter().any(|s| self.leaf_contact(leaf, s).is_some_and(|t| s.reaches(t)))
+    }
+
+    /// [`World::leaf_touches`] for segments of a query whose voxel bricks near them
+    /// are `near`: the same answer.
+    #[inline]
+    fn leaf_touches_near(&self, leaf: u32, segments: &[Segment], near: &NearBricks) -> bool {
+        match (&self.leaves[leaf as usize], &self.voxels) {
+            (Leaf::Voxels, Some(v)) => {
+                segments.iter().any(|s| v.first_contact_near(s, near).is_some_and(|t| s.reaches(t)))
+            }
+            _ => self.leaf_touches(leaf, segments),
+        }
     }
 
     /// Whether any segment touches any obstacle or occupied voxel, each up to its own

@@ -14,7 +14,7 @@
 //! exact tests are the same. A batch whose box is not inside the region, or a list
 //! too long to pay, falls back to the BVH.
 
-use super::{Leaf, Segment, World};
+use super::{Leaf, NearBricks, Segment, World};
 use crate::math::Point3;
 
 /// Above this many leaves near the region, a candidate walks the BVH instead.
@@ -31,6 +31,8 @@ pub struct Nearby {
     leaves: Vec<u32>,
     /// Too many leaves near the region: use the BVH.
     crowded: bool,
+    /// The voxel grid's bricks near the region (none without a grid).
+    bricks: NearBricks,
 }
 
 impl Nearby {
@@ -59,6 +61,11 @@ impl World {
             near.leaves.push(i as u32);
         }
         near.crowded = near.leaves.len() > MOST;
+        if let Some(v) = &self.voxels
+            && near.leaves.iter().any(|l| matches!(self.leaves[*l as usize], Leaf::Voxels))
+        {
+            near.bricks = v.near_bricks(lo, hi);
+        }
         near
     }
 
@@ -81,6 +88,8 @@ impl World {
         };
         let inside = (0..3).all(|a| from.lo[a] <= lo[a] && hi[a] <= from.hi[a]);
         if inside && !from.crowded {
+            // Bricks of the same grid, over a region holding this one.
+            into.bricks.clone_from(&from.bricks);
             for (b, leaf) in from.boxes.iter().zip(&from.leaves) {
                 if meets(b, *leaf) {
                     into.boxes.push(*b);
@@ -88,6 +97,7 @@ impl World {
                 }
             }
         } else {
+            into.bricks.clear();
             for (i, b) in self.boxes.iter().enumerate() {
                 let b = [b.mins.x, b.mins.y, b.mins.z, b.maxs.x, b.maxs.y, b.maxs.z];
                 if meets(&b, i as u32) {
@@ -138,7 +148,7 @@ impl World {
             // The grid's box is large: skip it when no occupied cell is near the star,
             // before making the batch.
             if let Leaf::Voxels = self.leaves[*leaf_id as usize]
-                && !self.voxels_may_touch(lo, hi)
+                && !self.voxels_may_touch_near(&near.bricks, lo, hi)
             {
                 continue;
             }
@@ -148,7 +158,7 @@ impl World {
                 None => {}
             }
             let batch = made.get_or_insert_with(|| (segments.take().expect("made once"))());
-            if self.leaf_touches(*leaf_id, batch.as_ref()) {
+            if self.leaf_touches_near(*leaf_id, batch.as_ref(), &near.bricks) {
                 return true;
             }
         }

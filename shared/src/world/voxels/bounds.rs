@@ -176,8 +176,8 @@ mod tests {
     /// Asserts that `seg`'s first contact is the same, bit for bit, with and without
     /// the boxes; whether it hits.
     fn same_with_and_without_boxes(grid: &VoxelGrid, seg: &Segment) -> bool {
-        let with = grid.first_contact_with(seg, true);
-        let without = grid.first_contact_with(seg, false);
+        let with = grid.first_contact_with(seg, true, None);
+        let without = grid.first_contact_with(seg, false, None);
         assert_eq!(
             with.map(f64::to_bits),
             without.map(f64::to_bits),

@@ -20,6 +20,7 @@
 
 mod bounds;
 mod cover;
+mod near;
 mod tree;
 mod walk;
 
@@ -27,6 +28,7 @@ use super::obstacle::{ObstacleError, finite};
 use super::segment::{Segment, clip_slab};
 use crate::limits::{MAX_OCCUPIED_VOXELS, MAX_VOXEL_BLOCKS_SPANNED, MAX_VOXEL_INDEX};
 use crate::math::{Point3, floor};
+pub use near::NearBricks;
 use tree::{Tree, TreeLimit};
 
 /// A cell index (i, j, k): the closed cube `origin + resolution·[i, i+1]×[j, j+1]×[k, k+1]`.
@@ -349,36 +351,54 @@ impl VoxelGrid {
 
     /// [`VoxelGrid::may_touch_box`] with at most `budget` node and brick lookups.
     fn may_touch_box_within(&self, lo: &Point3<f64>, hi: &Point3<f64>, budget: u32) -> bool {
+        match self.cells_near(lo, hi) {
+            Err(touch) => touch,
+            Ok((first, last)) => self.tree.any_in_box(first, last, budget) != Some(false),
+        }
+    }
+
+    /// The cells whose closed cubes may meet the closed box `[lo, hi]` (one more on
+    /// each side for rounding), cut to the occupied cells' box plus one, as
+    /// (first, last); or the answer of [`VoxelGrid::may_touch_box`] when that is
+    /// already known: `Err(false)` none, `Err(true)` a bound is not finite.
+    #[inline]
+    fn cells_near(&self, lo: &Point3<f64>, hi: &Point3<f64>) -> Result<(CellIndex, CellIndex), bool> {
         let Some((cells_lo, cells_end)) = self.tree.bounds() else {
-            return false;
+            return Err(false);
         };
         let mut first = [0i64; 3];
         let mut last = [0i64; 3];
         for a in 0..3 {
-            // Cells whose closed cube meets [lo, hi], one more on each side for rounding.
             let f = floor((lo[a] - self.origin[a]) / self.resolution) - 2.0;
             let l = floor((hi[a] - self.origin[a]) / self.resolution) + 1.0;
             if !(f.is_finite() && l.is_finite()) {
-                return true;
+                return Err(true);
             }
             first[a] = (f.max((cells_lo[a] - 1) as f64)) as i64;
             last[a] = (l.min(cells_end[a] as f64)) as i64;
             if first[a] > last[a] {
-                return false;
+                return Err(false);
             }
         }
-        self.tree.any_in_box(first, last, budget) != Some(false)
+        Ok((first, last))
     }
 
     /// The smallest `t ∈ [0, seg.length]` at which the segment touches an occupied
     /// closed cell, or `None`. The segment's `end` is not applied. Allocates nothing.
     pub fn first_contact(&self, seg: &Segment) -> Option<f64> {
-        self.first_contact_with(seg, true)
+        self.first_contact_with(seg, true, None)
+    }
+
+    /// [`VoxelGrid::first_contact`], the same answer bit for bit, for a segment of
+    /// a query whose bricks near it are `near`: a short segment among empty bricks
+    /// is settled by their bits.
+    pub fn first_contact_near(&self, seg: &Segment, near: &NearBricks) -> Option<f64> {
+        self.first_contact_with(seg, true, Some(near))
     }
 
     /// [`VoxelGrid::first_contact`], passing blocks by their cells' boxes or not
     /// (`boxes`): the same answer, bit for bit, either way.
-    fn first_contact_with(&self, seg: &Segment, boxes: bool) -> Option<f64> {
+    fn first_contact_with(&self, seg: &Segment, boxes: bool, near: Option<&NearBricks>) -> Option<f64> {
         let (lo, end) = self.tree.bounds()?;
         let (box_lo, box_hi) = self.aabb()?;
         let (mut t0, mut t1) = (0.0, seg.length.max(0.0));
@@ -391,7 +411,12 @@ impl VoxelGrid {
         // settled by a few lookups of its box, without a walk.
         if t1 - t0 < 16.0 * self.resolution {
             let (a, b) = (seg.point_at(t0), seg.point_at(t1));
-            if !self.may_touch_box_within(&a.inf(&b), &a.sup(&b), 16) {
+            let (lo, hi) = (a.inf(&b), a.sup(&b));
+            let touch = match near {
+                Some(near) => self.may_touch_box_near_within(near, &lo, &hi, 16),
+                None => self.may_touch_box_within(&lo, &hi, 16),
+            };
+            if !touch {
                 return None;
             }
         }

@@ -377,6 +377,33 @@ impl Tree {
         Some(false)
     }
 
+    /// Calls `f` with the key (cell index >> 3) of every non-empty 8³ brick whose key
+    /// lies in `lo..=hi`, node by node.
+    pub(super) fn for_each_brick_in(&self, lo: [i64; 3], hi: [i64; 3], mut f: impl FnMut([i64; 3])) {
+        const PER_NODE: i64 = 1 << (NODE_SHIFT - BRICK_SHIFT);
+        const SHIFT: u32 = NODE_SHIFT - BRICK_SHIFT;
+        for nx in lo[0] >> SHIFT..=hi[0] >> SHIFT {
+            for ny in lo[1] >> SHIFT..=hi[1] >> SHIFT {
+                for nz in lo[2] >> SHIFT..=hi[2] >> SHIFT {
+                    let Some(node) = self.node([nx, ny, nz]) else { continue };
+                    let base = [nx * PER_NODE, ny * PER_NODE, nz * PER_NODE];
+                    // The node's bricks within the range, from its corner (each 0..8).
+                    let l: [i64; 3] = std::array::from_fn(|a| (lo[a] - base[a]).max(0));
+                    let h: [i64; 3] = std::array::from_fn(|a| (hi[a] - base[a]).min(PER_NODE - 1));
+                    let yz = rows_and_columns(l[1], h[1], l[2], h[2]);
+                    for bx in l[0]..=h[0] {
+                        let mut present = node.present[bx as usize] & yz;
+                        while present != 0 {
+                            let bit = i64::from(present.trailing_zeros());
+                            present &= present - 1;
+                            f([base[0] + bx, base[1] + (bit >> 3), base[2] + (bit & 7)]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
     /// Whether cell `c` is occupied.
     #[inline]
     pub(super) fn get(&self, c: CellIndex) -> bool {
