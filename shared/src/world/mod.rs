@@ -332,7 +332,9 @@ impl World {
     }
 
     /// [`World::voxels_may_touch`], settled by the query's bricks `near` where they can.
-    #[inline]
+    /// Out of line: inlined into the candidate loops, it slows them on maps without
+    /// a grid, where it is never called.
+    #[inline(never)]
     fn voxels_may_touch_near(&self, near: &NearBricks, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
         self.voxels.as_ref().is_some_and(|v| v.may_touch_box_near(near, lo, hi))
     }
