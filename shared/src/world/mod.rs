@@ -28,6 +28,7 @@ mod obstacle;
 pub mod octomap;
 mod region;
 mod segment;
+mod sight_cylinder;
 mod star;
 mod voxels;
 
