@@ -253,8 +253,8 @@ impl World {
     /// [`World::any_sight_contact`] of the sight lines from `sensor` to each of
     /// `targets` ([`Segment::sight_line`] with `margin`), with one lookup of the
     /// fan, the lines made only once an obstacle listed for `sensor` is neither
-    /// ruled out by its distances (most sensors: none is) nor, a cylinder, decided
-    /// by the lines' paths. The same exact tests on the same segments, where they
+    /// ruled out by its distances (most sensors: none is) nor decided by the lines'
+    /// paths (a solid). The same exact tests on the same segments, where they
     /// run, so the same verdict. `[lo, hi]` holds every line.
     #[inline]
     pub fn any_sight_line_contact(
@@ -287,10 +287,9 @@ impl World {
         false
     }
 
-    /// The verdict on `leaf` of the sight lines from `sensor` to `targets`, when a
-    /// cylinder's lines' paths decide it without making them
-    /// ([`super::VerticalCylinder::touches_sight_lines`]); `None` when the exact
-    /// test must.
+    /// The verdict on `leaf` of the sight lines from `sensor` to `targets`, when
+    /// the lines' paths decide it without making them (a cylinder, a box: see
+    /// `sight_path`); `None` when the exact test must.
     #[inline(always)]
     fn sight_decided(
         &self,
@@ -305,7 +304,10 @@ impl World {
             Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } => {
                 c.touches_sight_lines(sensor, targets, margin, lo, hi)
             }
-            _ => None,
+            Leaf::Solid { shape: super::Obstacle::Box(b), .. } => {
+                b.touches_sight_lines(sensor, targets, margin, lo, hi)
+            }
+            Leaf::Voxels => None,
         }
     }
 
