@@ -297,12 +297,9 @@ mod tests {
                 for targets in [&others[..1], &others[..]] {
                     let want = exact(&c, &sensor, targets);
                     let (lo, hi) = span(&sensor, targets);
-                    match c.touches_sight_lines_by(&sensor, targets, 1e-6, &lo, &hi, pad) {
-                        Some(got) => {
-                            wrong += usize::from(got != want);
-                            if got { hits += 1 } else { misses += 1 }
-                        }
-                        None => {}
+                    if let Some(got) = c.touches_sight_lines_by(&sensor, targets, 1e-6, &lo, &hi, pad) {
+                        wrong += usize::from(got != want);
+                        if got { hits += 1 } else { misses += 1 }
                     }
                 }
             }
@@ -399,12 +396,9 @@ mod tests {
                         .filter_map(|q| Segment::sight_line(&sensor, q, 1e-6))
                         .any(|s| Obstacle::Box(b).first_contact(&s).is_some_and(|t| s.reaches(t)));
                     let (lo, hi) = span(&sensor, targets);
-                    match b.touches_sight_lines_by(&sensor, targets, 1e-6, &lo, &hi, pad) {
-                        Some(got) => {
-                            wrong += usize::from(got != want);
-                            if got { hits += 1 } else { misses += 1 }
-                        }
-                        None => {}
+                    if let Some(got) = b.touches_sight_lines_by(&sensor, targets, 1e-6, &lo, &hi, pad) {
+                        wrong += usize::from(got != want);
+                        if got { hits += 1 } else { misses += 1 }
                     }
                 }
             }
