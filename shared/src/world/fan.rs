@@ -264,9 +264,10 @@ impl World {
 impl World {
     /// [`World::any_sight_contact`] of the sight lines from `sensor` to each of
     /// `targets` ([`Segment::sight_line`] with `margin`), with one lookup of the
-    /// fan, the lines made only once an obstacle listed for `sensor` is not ruled
-    /// out by its distances (most sensors: none is). The same exact tests on the
-    /// same segments, so the same verdict. `[lo, hi]` holds every line.
+    /// fan, the lines made only once an obstacle listed for `sensor` is neither
+    /// ruled out by its distances (most sensors: none is) nor decided by the lines'
+    /// paths (a solid). The same exact tests on the same segments, where they
+    /// run, so the same verdict. `[lo, hi]` holds every line.
     #[inline]
     pub fn any_sight_line_contact(
         &self,
@@ -281,16 +282,45 @@ impl World {
             return self.sight_lines_by_chunks(fan, sensor, targets, margin, lo, hi);
         };
         // The lines are made (out of line) only from the first obstacle that is
-        // not ruled out.
+        // not ruled out or decided without them.
         for (i, e) in entries.iter().enumerate() {
             if e.from > l {
                 break;
             }
-            if !self.sight_rules_out(fan, sensor, e.leaf, lo, hi) {
-                return self.sight_lines_touch(fan, sensor, targets, margin, &entries[i..], l, lo, hi);
+            if self.sight_rules_out(fan, sensor, e.leaf, lo, hi) {
+                continue;
+            }
+            match self.sight_decided(e.leaf, sensor, targets, margin, lo, hi) {
+                Some(true) => return true,
+                Some(false) => {}
+                None => return self.sight_lines_touch(fan, sensor, targets, margin, &entries[i..], l, lo, hi),
             }
         }
         false
+    }
+
+    /// The verdict on `leaf` of the sight lines from `sensor` to `targets`, when
+    /// the lines' paths decide it without making them (a cylinder, a box: see
+    /// `sight_path`); `None` when the exact test must.
+    #[inline(always)]
+    fn sight_decided(
+        &self,
+        leaf: u32,
+        sensor: &Point3<f64>,
+        targets: &[Point3<f64>],
+        margin: f64,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+    ) -> Option<bool> {
+        match self.leaves[leaf as usize] {
+            Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } => {
+                c.touches_sight_lines(sensor, targets, margin, lo, hi)
+            }
+            Leaf::Solid { shape: super::Obstacle::Box(b), .. } => {
+                b.touches_sight_lines(sensor, targets, margin, lo, hi)
+            }
+            Leaf::Voxels => None,
+        }
     }
 
     /// Whether the fan's distances, or the grid's bricks, rule out that `leaf`
@@ -312,7 +342,7 @@ impl World {
     }
 
     /// The sight lines made, tested against `entries` up to the sensor's distance
-    /// `l` (the first is within it and not ruled out).
+    /// `l` (the first is within it, not ruled out and not decided without them).
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
     fn sight_lines_touch(
@@ -338,9 +368,14 @@ impl World {
             if e.from > l {
                 break;
             }
-            if !self.sight_rules_out(fan, sensor, e.leaf, lo, hi)
-                && self.leaf_touches_near(e.leaf, &batch[..n], &fan.bricks)
-            {
+            if self.sight_rules_out(fan, sensor, e.leaf, lo, hi) {
+                continue;
+            }
+            let touches = match self.sight_decided(e.leaf, sensor, targets, margin, lo, hi) {
+                Some(decided) => decided,
+                None => self.leaf_touches_near(e.leaf, &batch[..n], &fan.bricks),
+            };
+            if touches {
                 return true;
             }
         }

@@ -28,6 +28,7 @@ mod obstacle;
 pub mod octomap;
 mod region;
 mod segment;
+mod sight_path;
 mod star;
 mod voxels;
 
