@@ -503,12 +503,15 @@ fn span(segments: &[Segment]) -> Option<(Point3<f64>, Point3<f64>)> {
 mod tests {
     use super::*;
 
-    /// A tiny seeded generator for the world tests here and in `region`, `nearby`.
+    /// A tiny seeded generator for the world's tests (the crate does not depend on rand).
     pub(super) struct Lcg(pub(super) u64);
     impl Lcg {
         pub(super) fn next(&mut self) -> f64 {
             self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+        pub(super) fn below(&mut self, n: i64) -> i64 {
+            (self.next() * n as f64) as i64
         }
     }
 

@@ -156,18 +156,7 @@ mod tests {
     use super::super::{VoxelBlock, VoxelGrid};
     use super::*;
     use crate::math::Vector3;
-
-    /// A tiny deterministic generator (the shared crate does not depend on rand).
-    struct Lcg(u64);
-    impl Lcg {
-        fn next(&mut self) -> f64 {
-            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-        fn below(&mut self, n: i64) -> i64 {
-            (self.next() * n as f64) as i64
-        }
-    }
+    use crate::world::tests::Lcg;
 
     fn passed() -> u64 {
         PASSED.with(std::cell::Cell::get)

@@ -224,15 +224,7 @@ mod tests {
     use super::*;
     use crate::math::Vector3;
     use crate::world::Segment;
-
-    /// A tiny deterministic generator (the shared crate does not depend on rand).
-    struct Lcg(u64);
-    impl Lcg {
-        fn next(&mut self) -> f64 {
-            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
+    use crate::world::tests::Lcg;
 
     /// Whether an occupied cell's closed cube meets the closed box `[lo, hi]`,
     /// cell by cell through the tree (a cell more below, never fewer).
