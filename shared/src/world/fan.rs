@@ -29,6 +29,7 @@
 //! could make it wrong) use the list of obstacles within reach of that disc instead.
 //! Sensors farther than the fan's range fall back to [`World::any_contact`].
 
+use super::sight_path::SightPath;
 use super::{Leaf, NearBricks, Segment, World};
 use crate::math::{Point3, Vector3};
 use std::f64::consts::PI;

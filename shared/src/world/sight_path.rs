@@ -35,13 +35,15 @@ use crate::math::Point3;
 /// The pad: an absolute part and a part per metre of the coordinates involved.
 const PAD: (f64, f64) = (1e-6, 1e-7);
 
-impl VerticalCylinder {
+/// A solid whose verdict against one sensor's sight lines can often be read off
+/// the lines' paths (the module doc says how, per shape).
+pub(crate) trait SightPath {
     /// Whether some sight line from `sensor` to one of `targets` (each as
-    /// [`Segment::sight_line`] with `margin` makes it) touches the cylinder, when
-    /// the lines' paths decide it by the pad; `None` when the exact test must.
-    /// `[lo, hi]` holds every line (it sizes the pad).
+    /// [`Segment::sight_line`](super::Segment::sight_line) with `margin` makes it)
+    /// touches the solid, when the lines' paths decide it by [`PAD`]; `None` when
+    /// the exact test must. `[lo, hi]` holds every line (it sizes the pad).
     #[inline]
-    pub(crate) fn touches_sight_lines(
+    fn touches_sight_lines(
         &self,
         sensor: &Point3<f64>,
         targets: &[Point3<f64>],
@@ -52,6 +54,19 @@ impl VerticalCylinder {
         self.touches_sight_lines_by(sensor, targets, margin, lo, hi, PAD)
     }
 
+    /// [`SightPath::touches_sight_lines`] by `pad` (tests make it too tight).
+    fn touches_sight_lines_by(
+        &self,
+        sensor: &Point3<f64>,
+        targets: &[Point3<f64>],
+        margin: f64,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+        pad: (f64, f64),
+    ) -> Option<bool>;
+}
+
+impl SightPath for VerticalCylinder {
     #[inline(always)]
     fn touches_sight_lines_by(
         &self,
@@ -90,23 +105,7 @@ impl VerticalCylinder {
     }
 }
 
-impl AxisBox {
-    /// Whether some sight line from `sensor` to one of `targets` (each as
-    /// [`Segment::sight_line`] with `margin` makes it) touches the box, when the
-    /// lines' paths decide it by the pad; `None` when the exact test must.
-    /// `[lo, hi]` holds every line (it sizes the pad).
-    #[inline]
-    pub(crate) fn touches_sight_lines(
-        &self,
-        sensor: &Point3<f64>,
-        targets: &[Point3<f64>],
-        margin: f64,
-        lo: &Point3<f64>,
-        hi: &Point3<f64>,
-    ) -> Option<bool> {
-        self.touches_sight_lines_by(sensor, targets, margin, lo, hi, PAD)
-    }
-
+impl SightPath for AxisBox {
     #[inline(always)]
     fn touches_sight_lines_by(
         &self,
