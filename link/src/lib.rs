@@ -103,6 +103,11 @@ const NAP: Duration = Duration::from_millis(100);
 /// peer that stopped reading must not keep the process from exiting on SIGTERM.
 const STOP_GRACE: Duration = Duration::from_secs(3);
 
+/// How long a stopping link waits for the Zenoh session to close. Zenoh bounds
+/// its close (10 s), but not while its routing is stalled (a lock held under peer
+/// churn): then nothing returns, and the close is left behind on its thread.
+const CLOSE_GRACE: Duration = Duration::from_secs(12);
+
 /// Which host a link runs on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Side {
@@ -432,8 +437,10 @@ pub struct Link {
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
     counters: Arc<Counters>,
+    /// Whether the other host is connected, as the watcher thread last saw it.
+    peers: Arc<AtomicBool>,
     /// This link's announcement to the other host, and what it hears of the other's.
-    _hello: Option<(zenoh::liveliness::LivelinessToken, zenoh::pubsub::Subscriber<()>)>,
+    hello: Option<(zenoh::liveliness::LivelinessToken, zenoh::pubsub::Subscriber<()>)>,
 }
 
 impl Debug for Link {
@@ -493,9 +500,10 @@ impl Link {
             stop: Arc::new(AtomicBool::new(false)),
             threads: Vec::new(),
             counters: Arc::default(),
-            _hello: None,
+            peers: Arc::default(),
+            hello: None,
         };
-        link._hello = Some(link.hello(config).map_err(zerr)?);
+        link.hello = Some(link.hello(config).map_err(zerr)?);
         let rover_side = config.side == Side::Rover;
         // Each side sends its own topics: the rover's host rendezvous, estimates,
         // acknowledgements, truth and the rover's heartbeat; the viewer's host
@@ -544,6 +552,7 @@ impl Link {
         // they hear each other, and by then every other topic crosses.
         link.forward::<PresenceMsg>(config, rover_side, MISSION, ROVER_PRESENCE_TOPIC)?;
         link.forward::<PresenceMsg>(config, !rover_side, MISSION, VIEWER_PRESENCE_TOPIC)?;
+        link.watch_peers()?;
         tracing::info!(
             side = config.side.name(),
             mission = %config.topics.mission,
@@ -714,9 +723,28 @@ impl Link {
         }
     }
 
-    /// Whether the other host is connected now.
+    /// Whether the other host is connected, as seen at most one nap ago. It never
+    /// waits on Zenoh, so a process polling it still notices SIGTERM when Zenoh
+    /// stalls ([`Link::watch_peers`]).
     pub fn connected(&self) -> bool {
-        self.session.info().peers_zid().wait().next().is_some()
+        self.peers.load(Ordering::Relaxed)
+    }
+
+    /// Keeps [`Link::connected`] current from a thread of its own: asking Zenoh
+    /// for its peers blocks while its routing is stalled.
+    fn watch_peers(&mut self) -> Result<(), LinkStartError> {
+        let (session, stop, peers) = (self.session.clone(), self.stop.clone(), self.peers.clone());
+        let thread = std::thread::Builder::new()
+            .name("link-peers".into())
+            .spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    peers.store(session.info().peers_zid().wait().next().is_some(), Ordering::Relaxed);
+                    std::thread::sleep(NAP);
+                }
+            })
+            .map_err(|e| LinkStartError::Zenoh(format!("cannot start a thread: {e}")))?;
+        self.threads.push(thread);
+        Ok(())
     }
 
     /// Stops forwarding, closes the session; returns the final counts.
@@ -731,9 +759,22 @@ impl Link {
         if !stuck.is_empty() {
             tracing::warn!("stopping: {} did not stop within {STOP_GRACE:?}; left behind", stuck.join(", "));
         }
-        // Zenoh bounds the close itself (10 s).
-        if let Err(e) = self.session.close().wait() {
-            tracing::warn!("stopping: the Zenoh session did not close cleanly: {e}");
+        // The announcement's undeclaring and the close wait on Zenoh: on a thread
+        // of their own, so that a stalled Zenoh cannot keep the process from exiting.
+        let (session, hello) = (self.session.clone(), self.hello.take());
+        let (done, closed) = std::sync::mpsc::channel();
+        let closer = std::thread::Builder::new().name("link-close".into()).spawn(move || {
+            drop(hello);
+            let _ = done.send(session.close().wait());
+        });
+        let outcome = match closer {
+            Ok(_) => closed.recv_timeout(CLOSE_GRACE).ok(),
+            Err(_) => Some(self.session.close().wait()),
+        };
+        match outcome {
+            Some(Ok(())) => {}
+            Some(Err(e)) => tracing::warn!("stopping: the Zenoh session did not close cleanly: {e}"),
+            None => tracing::warn!("stopping: the Zenoh session did not close within {CLOSE_GRACE:?}; left behind"),
         }
     }
 }
