@@ -54,7 +54,7 @@ def test_no_daemon_is_reported_and_the_node_outlives_a_dyfosd_restart(
 
 
 def test_ctrl_c_ends_the_node_during_a_long_search(ros: Ros, daemon: Any, start_node: Any) -> None:
-    """SIGINT while the daemon searches for the node (about 10 s of ``brute``): the node
+    """SIGINT while the daemon searches for the node (seconds of ``brute``): the node
     answers the request ``shutting_down`` and exits 0 without waiting for the search; the
     daemon abandons it."""
     node = start_node(ros, daemon)

@@ -92,9 +92,12 @@ fn a_deadline_returns_the_best_pose_so_far_flagged() {
     let sandbox = Sandbox::new("deadline");
     let s = scenario("golden/scenarios/numerical/map_00.json");
     let (_daemon, mut client) = sandbox.start_serving(1, &s.world);
+    // 4096 perimeter points: a `brute` of seconds, far beyond the deadline (with the
+    // default 8 it can finish within it).
     let request = RendezvousRequest {
         algorithm: Algorithm::Brute,
         deadline: Some(Duration::from_millis(30)),
+        params: Params { perimeter_points: 4096, ..s.params },
         ..RendezvousRequest::new(1, s.belief)
     };
     match client.rendezvous(&request, PATIENCE) {
