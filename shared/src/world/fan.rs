@@ -230,8 +230,8 @@ impl World {
     /// Whether any of `segments`, the sight lines from `sensor` to targets within the
     /// fan's radius of its marker at the marker's height, touches anything:
     /// [`World::any_contact`]'s verdict, bit for bit, by the exact tests of the
-    /// obstacles the fan lists for `sensor`, but for the cylinders the sensor's own
-    /// distances show out of reach ([`SightFan::misses_cylinder`]). `[lo, hi]`
+    /// obstacles the fan lists for `sensor`, but for those the sensor's own
+    /// distances or the grid's bricks rule out ([`World::sight_rules_out`]). `[lo, hi]`
     /// holds every segment (for the voxel grid's broad phase).
     pub fn any_sight_contact(
         &self,
@@ -248,11 +248,8 @@ impl World {
             if e.from > l {
                 break;
             }
-            match self.leaves[e.leaf as usize] {
-                Leaf::Voxels if !self.voxels_may_touch_near(&fan.bricks, lo, hi) => continue,
-                Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } if fan.misses_cylinder(sensor, &c) => continue,
-                Leaf::Solid { shape: super::Obstacle::Box(b), .. } if fan.misses_box(sensor, &b) => continue,
-                _ => {}
+            if self.sight_rules_out(fan, sensor, e.leaf, lo, hi) {
+                continue;
             }
             if self.leaf_touches_near(e.leaf, segments, &fan.bricks) {
                 return true;
