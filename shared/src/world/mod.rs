@@ -5,7 +5,8 @@
 //! ([`World::apply`]), or fails whole and leaves the old one as it was: that is what
 //! makes map updates atomic for the daemon. Queries go through a bounding-volume
 //! hierarchy (parry's `Bvh`) whose leaves are the obstacles, plus one leaf for the
-//! voxel grid, each tested exactly. A search's per-candidate queries go through two
+//! voxel grid, each tested exactly; a world of at most [`SCAN_LEAVES`] leaves is
+//! scanned leaf by leaf instead, with the same verdicts. A search's per-candidate queries go through two
 //! per-query indexes over the same leaves instead, with the same verdicts: the
 //! leaves near every collision star ([`Nearby`]) and the sight fan ([`SightFan`]).
 //!
@@ -154,6 +155,13 @@ enum Leaf {
 /// face always reaches the exact leaf test.
 const LEAF_PAD: f64 = 1e-7;
 
+/// Worlds with at most this many leaves are queried by a scan of the leaves' boxes,
+/// without a BVH: over so few boxes a hierarchy prunes little, a search's
+/// per-candidate queries go through its own indexes anyway ([`Nearby`],
+/// [`SightFan`]), and building the hierarchy was a large share of a fresh
+/// process's search.
+pub const SCAN_LEAVES: usize = 128;
+
 /// Most leaves gathered on the stack for a batch of segments before falling back to
 /// one BVH walk per segment.
 const GATHER_CAPACITY: usize = 32;
@@ -166,8 +174,9 @@ pub struct World {
     sun: Sun,
     obstacles: BTreeMap<u32, Obstacle>,
     voxels: Option<VoxelGrid>,
-    /// Built at the first query, from `boxes`: a world read only for its content (a
-    /// client's map snapshot, a daemon's map change on its IPC thread) never pays for it.
+    /// Built at the first query, from `boxes`, when there are more than
+    /// [`SCAN_LEAVES`]: a world read only for its content (a client's map snapshot,
+    /// a daemon's map change on its IPC thread) never pays for it.
     bvh: OnceLock<Bvh>,
     /// The padded box of each leaf.
     boxes: Vec<Aabb>,
@@ -229,19 +238,24 @@ impl World {
         World { version, bounds, sun, obstacles, voxels, bvh: OnceLock::new(), boxes, leaves }
     }
 
-    /// Builds the index over the leaves now if no query has yet: a search calls it
-    /// before its first candidate, so that evaluating candidates allocates nothing.
+    /// Builds the index over the leaves now if the world has one and no query has
+    /// built it yet: a search calls it before its first candidate, so that
+    /// evaluating candidates allocates nothing.
     pub fn build_index(&self) {
         self.bvh();
     }
 
-    /// The bounding-volume hierarchy over the leaves, built on first use.
+    /// The bounding-volume hierarchy over the leaves, built on first use; `None`
+    /// for a world of at most [`SCAN_LEAVES`] leaves, which is scanned.
     #[inline]
-    fn bvh(&self) -> &Bvh {
-        match self.bvh.get() {
+    fn bvh(&self) -> Option<&Bvh> {
+        if self.boxes.len() <= SCAN_LEAVES {
+            return None;
+        }
+        Some(match self.bvh.get() {
             Some(bvh) => bvh,
             None => self.build_bvh(),
-        }
+        })
     }
 
     /// Kept out of line so that the check in [`World::bvh`] is all a search pays.
@@ -249,7 +263,7 @@ impl World {
     #[inline(never)]
     fn build_bvh(&self) -> &Bvh {
         self.bvh.get_or_init(|| {
-            if self.boxes.is_empty() { Bvh::new() } else { Bvh::from_leaves(BvhBuildStrategy::Binned, &self.boxes) }
+            Bvh::from_leaves(BvhBuildStrategy::Binned, &self.boxes)
         })
     }
 
@@ -403,18 +417,25 @@ impl World {
     }
 
     /// Calls `visit` with each leaf whose node boxes all meet the closed box
-    /// `[lo, hi]`, in the BVH's order, until `visit` returns `false`; returns whether
-    /// the walk ended without being stopped. Allocates nothing.
+    /// `[lo, hi]`, in the index's order, until `visit` returns `false`; returns
+    /// whether the walk ended without being stopped. Allocates nothing.
     pub(crate) fn leaves_meeting_box(
         &self,
         lo: &Point3<f64>,
         hi: &Point3<f64>,
         mut visit: impl FnMut(u32) -> bool,
     ) -> bool {
+        // Not `any(miss)`: a NaN keeps the node.
+        let misses = |mins: &Point3<f64>, maxs: &Point3<f64>| (0..3).any(|a| maxs[a] < lo[a] || mins[a] > hi[a]);
+        let Some(bvh) = self.bvh() else {
+            return (0u32..)
+                .zip(&self.boxes)
+                .filter(|(_, b)| !misses(&b.mins, &b.maxs))
+                .all(|(leaf, _)| visit(leaf));
+        };
         let mut finished = true;
-        self.bvh().traverse(|node| {
-            let (mins, maxs) = (node.mins(), node.maxs());
-            if (0..3).any(|a| maxs[a] < lo[a] || mins[a] > hi[a]) {
+        bvh.traverse(|node| {
+            if misses(&node.mins(), &node.maxs()) {
                 return TraversalAction::Prune;
             }
             if let Some(leaf) = node.leaf_data()
@@ -429,11 +450,18 @@ impl World {
     }
 
     /// Calls `visit` with each leaf the segment touches (up to its end) and the
-    /// distance of first contact, in the BVH's order, until `visit` returns `false`;
-    /// returns whether the walk ended without being stopped.
+    /// distance of first contact, in the index's order, until `visit` returns
+    /// `false`; returns whether the walk ended without being stopped.
     fn contacts_along(&self, seg: &Segment, mut visit: impl FnMut(u32, f64) -> bool) -> bool {
+        let Some(bvh) = self.bvh() else {
+            return (0u32..)
+                .zip(&self.boxes)
+                .filter(|(_, b)| first_contact_aabb(seg, &b.mins, &b.maxs).is_some())
+                .filter_map(|(leaf, _)| Some((leaf, self.leaf_contact(leaf, seg).filter(|t| seg.reaches(*t))?)))
+                .all(|(leaf, t)| visit(leaf, t));
+        };
         let mut finished = true;
-        self.bvh().traverse(|node| {
+        bvh.traverse(|node| {
             if first_contact_aabb(seg, &node.mins(), &node.maxs()).is_none() {
                 return TraversalAction::Prune;
             }
@@ -546,9 +574,10 @@ mod tests {
     }
 
     #[test]
-    fn bvh_agrees_with_scan() {
+    fn the_index_agrees_with_a_scan_of_every_obstacle() {
         let mut rng = Lcg(11);
-        for n in [0, 1, 2, 25, 200] {
+        // Scanned leaf by leaf up to SCAN_LEAVES, through a BVH above.
+        for n in [0, 1, 2, 25, SCAN_LEAVES, SCAN_LEAVES + 1, 200] {
             let world = random_world(&mut rng, n, true);
             let mut hits = 0;
             for i in 0..3000 {
@@ -564,6 +593,7 @@ mod tests {
                 assert_eq!(segs.iter().any(|s| !world.contacts(s).is_empty()), expected);
                 hits += usize::from(expected);
             }
+            assert_eq!(world.bvh.get().is_some(), world.leaves.len() > SCAN_LEAVES, "n = {n}");
             if n >= 25 {
                 assert!(hits > 300, "n = {n}: only {hits} hits");
             }
@@ -700,7 +730,7 @@ mod tests {
     #[test]
     fn the_index_is_built_at_the_first_query_and_kept_by_clones() {
         let mut rng = Lcg(5);
-        let world = random_world(&mut rng, 25, true);
+        let world = random_world(&mut rng, 200, true);
         // Read for its content only (a snapshot): no index.
         assert!(world.bvh.get().is_none());
         let unqueried = world.clone();
@@ -712,6 +742,16 @@ mod tests {
         assert!(unqueried.bvh.get().is_none());
         assert_eq!(unqueried.any_contact(&[seg]), hit);
         assert_eq!(world.any_contact_by_scan(&[seg]), hit);
+    }
+
+    #[test]
+    fn a_small_world_is_scanned_without_an_index() {
+        let mut rng = Lcg(5);
+        let world = random_world(&mut rng, SCAN_LEAVES - 1, true);
+        world.build_index();
+        let seg = Segment::closed(Point3::new(0.0, 0.0, 1.0), Vector3::new(1.0, 0.0, 0.0), 8.0);
+        assert_eq!(world.any_contact(&[seg]), world.any_contact_by_scan(&[seg]));
+        assert!(world.bvh.get().is_none());
     }
 
     #[test]
