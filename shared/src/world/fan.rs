@@ -24,8 +24,8 @@
 //! Floating point: every radius is padded (`FanPad`) far beyond the rounding of
 //! the points and of the exact tests (a grazing contact is reported within about
 //! 2e-8 of the distance to the obstacle's centre), each interval is widened by one
-//! bucket on each side (the azimuth of P − m is computed without trigonometry, to
-//! within a few ulps), and sensors within `CLOSE` of m (whose azimuth rounding
+//! bucket on each side (the azimuth of P − m, and the footprint's edges, are computed
+//! without trigonometry, to within a few ulps), and sensors within `CLOSE` of m (whose azimuth rounding
 //! could make it wrong) use the list of obstacles within reach of that disc instead.
 //! Sensors farther than the fan's range fall back to [`World::any_contact`].
 
@@ -148,8 +148,7 @@ impl World {
     pub(crate) fn sight_fan_padded(&self, marker: &Point3<f64>, radius: f64, range: f64, pad: FanPad) -> SightFan {
         let (mx, my) = (marker.x, marker.y);
         let mut listed: Vec<(Entry, std::ops::Range<usize>)> = Vec::with_capacity(self.leaves.len());
-        let width = 2.0 * PI / BUCKETS as f64;
-        let widen = if pad.widen { width } else { 0.0 };
+        let (sin_widen, cos_widen) = if pad.widen { (2.0 * PI / BUCKETS as f64).sin_cos() } else { (0.0, 1.0) };
         for (i, leaf) in self.leaves.iter().enumerate() {
             // The footprint: a disc around (cx, cy) of radius r.
             let (cx, cy, r) = match leaf {
@@ -170,18 +169,19 @@ impl World {
                 continue;
             }
             let entry = Entry { from, leaf: i as u32 };
-            let half = if d > reach { (reach / d).asin() } else { PI };
-            if half + widen >= PI || half.is_nan() {
+            // Not `d <= reach`: a NaN is listed everywhere.
+            if !(d > reach) {
                 listed.push((entry, 0..BUCKETS));
                 continue;
             }
-            let azimuth = (cy - my).atan2(cx - mx);
-            let edge = |a: f64| {
-                let (s, c) = a.sin_cos();
-                bucket(c, s)
-            };
-            let first = edge(azimuth - half - widen);
-            let last = edge(azimuth + half + widen);
+            // The footprint's edges seen from the marker: the centre's direction turned
+            // by ±(half + a bucket), sin(half) = reach / d, as vectors scaled by d (no
+            // angle is formed; the bucket of widening covers their rounding).
+            let along = (d * d - reach * reach).sqrt();
+            let (c, s) = (along * cos_widen - reach * sin_widen, reach * cos_widen + along * sin_widen);
+            let (ux, uy) = (cx - mx, cy - my);
+            let first = bucket(ux * c + uy * s, uy * c - ux * s);
+            let last = bucket(ux * c - uy * s, uy * c + ux * s);
             let count = (last + BUCKETS - first) % BUCKETS + 1;
             listed.push((entry, first..first + count));
         }

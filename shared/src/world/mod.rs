@@ -262,9 +262,7 @@ impl World {
     #[cold]
     #[inline(never)]
     fn build_bvh(&self) -> &Bvh {
-        self.bvh.get_or_init(|| {
-            Bvh::from_leaves(BvhBuildStrategy::Binned, &self.boxes)
-        })
+        self.bvh.get_or_init(|| Bvh::from_leaves(BvhBuildStrategy::Binned, &self.boxes))
     }
 
     /// The same content at `version`: a map's content read back (a snapshot, a
@@ -428,10 +426,7 @@ impl World {
         // Not `any(miss)`: a NaN keeps the node.
         let misses = |mins: &Point3<f64>, maxs: &Point3<f64>| (0..3).any(|a| maxs[a] < lo[a] || mins[a] > hi[a]);
         let Some(bvh) = self.bvh() else {
-            return (0u32..)
-                .zip(&self.boxes)
-                .filter(|(_, b)| !misses(&b.mins, &b.maxs))
-                .all(|(leaf, _)| visit(leaf));
+            return (0u32..).zip(&self.boxes).filter(|(_, b)| !misses(&b.mins, &b.maxs)).all(|(leaf, _)| visit(leaf));
         };
         let mut finished = true;
         bvh.traverse(|node| {
