@@ -62,12 +62,21 @@ pub enum MapKind {
     Building,
     /// SPEC §10 maps as 0.1 m occupancy grids: cylinders of the same clutter as voxels.
     Voxels,
+    /// The same building as boxes ([`Building::boxes`]): its scene in the terms of
+    /// a cylinder map.
+    BuildingBoxes,
 }
 
 impl MapKind {
     /// Every kind, in table order.
-    pub const ALL: [MapKind; 5] =
-        [MapKind::Numerical, MapKind::Hard, MapKind::Octomap, MapKind::Building, MapKind::Voxels];
+    pub const ALL: [MapKind; 6] = [
+        MapKind::Numerical,
+        MapKind::Hard,
+        MapKind::Octomap,
+        MapKind::Building,
+        MapKind::Voxels,
+        MapKind::BuildingBoxes,
+    ];
 
     /// The name used in flags and tables.
     pub fn name(self) -> &'static str {
@@ -77,6 +86,7 @@ impl MapKind {
             MapKind::Octomap => "octomap",
             MapKind::Building => "building",
             MapKind::Voxels => "voxels",
+            MapKind::BuildingBoxes => "building-boxes",
         }
     }
 
@@ -262,6 +272,11 @@ fn maps_of(kind: MapKind, config: &CompareConfig) -> anyhow::Result<Vec<MapFiles
                 vec![("building.bt".into(), write_bt(RESOLUTION, building.cells())?)],
             ));
         }
+        MapKind::BuildingBoxes => {
+            let building = Building::with_cells(config.building_cells);
+            let world = World::new(0, building.bounds()?, Building::sun(), building.boxes(), None)?;
+            out.push(plain("building-boxes".to_string(), &building.scenario(world)?)?);
+        }
         MapKind::Voxels => {
             let count = config.maps.div_ceil(4);
             for (i, s) in numerical_maps(MAP_SEED, count, &NumericalConfig::paper()).iter().enumerate() {
@@ -339,6 +354,42 @@ pub fn dyfos_in(dir: &Path) -> anyhow::Result<PathBuf> {
         );
     }
     Ok(path)
+}
+
+/// One build's `dyfos` and `dyfosd`, copied into a folder of their own (removed on
+/// drop). Both builds are run from such copies, written the same way at the same
+/// time: on a Linux guest a fresh process's time depended on how its executable's
+/// pages were last written or read (a binary as the linker wrote it ran up to 14 %
+/// slower than a copy of itself), which would favour one build for a whole run.
+pub struct BuildCopy {
+    /// The copied `dyfos`, `dyfosd` beside it.
+    pub dyfos: PathBuf,
+    dir: PathBuf,
+}
+
+impl BuildCopy {
+    /// Copies the binaries of the build in `dir` (see [`dyfos_in`]).
+    pub fn new(dir: &Path, tag: &str) -> anyhow::Result<Self> {
+        let dyfos = dyfos_in(dir)?;
+        let into = std::env::temp_dir().join(format!("cmp{}{tag}bin", std::process::id()));
+        std::fs::create_dir_all(&into).with_context(|| format!("cannot create {}", into.display()))?;
+        let copy = BuildCopy { dyfos: into.join(dyfos.file_name().unwrap_or_default()), dir: into };
+        let dyfosd = dyfos.with_file_name(format!("dyfosd{}", std::env::consts::EXE_SUFFIX));
+        for from in [&dyfos, &dyfosd] {
+            if from.is_file() {
+                let to = copy.dir.join(from.file_name().unwrap_or_default());
+                std::fs::copy(from, &to)
+                    .with_context(|| format!("cannot copy {} to {}", from.display(), to.display()))?;
+            }
+        }
+        Ok(copy)
+    }
+}
+
+impl Drop for BuildCopy {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
 }
 
 /// One build's `dyfosd`, on its own prefix, domain and state directory (removed on
@@ -568,18 +619,19 @@ pub fn compare(
     floors: &[(Model, f64)],
     mut progress: impl FnMut(&str),
 ) -> anyhow::Result<Comparison> {
-    let (a, b) = (dyfos_in(baseline_dir)?, dyfos_in(new_dir)?);
+    // Declared before the builds: a daemon stops before its binaries are removed.
+    let copies = (BuildCopy::new(baseline_dir, "base")?, BuildCopy::new(new_dir, "new")?);
     let model = cases.iter().find_map(|c| c.model_file.as_deref());
-    let mut build = |dyfos: PathBuf, tag: &str| -> anyhow::Result<Build> {
+    let mut build = |copy: &BuildCopy, tag: &str| -> anyhow::Result<Build> {
         Ok(match config.through {
-            Through::Solve => Build::Solve(dyfos),
+            Through::Solve => Build::Solve(copy.dyfos.clone()),
             Through::Daemon => {
                 progress(&format!("starting the {tag} build's dyfosd"));
-                Build::Daemon(BuildDaemon::start(&dyfos, tag, model)?)
+                Build::Daemon(BuildDaemon::start(&copy.dyfos, tag, model)?)
             }
         })
     };
-    let (a, b) = (build(a, "base")?, build(b, "new")?);
+    let (a, b) = (build(&copies.0, "base")?, build(&copies.1, "new")?);
     let mut queries = Vec::new();
     for case in cases {
         for &algorithm in &config.algorithms {
@@ -654,9 +706,11 @@ pub struct AgainstCylinders {
 
 /// Per algorithm, model and voxel or OctoMap kind: a [`MapKind::Voxels`] query
 /// against the same SPEC map as cylinders (`voxels_03` against `numerical_03`, same
-/// seed), the median of those ratios; an OctoMap query against the median of the
-/// SPEC maps' queries with its seed (there is no same scene in cylinders), the median
-/// over its queries. Each query's time is its median over the rounds.
+/// seed), the median of those ratios; the building against itself as boxes
+/// ([`MapKind::BuildingBoxes`], same seed) when that was run; the real scan (or the
+/// building without its boxes) against the median of the SPEC maps' queries with
+/// its seed (there is no same scene in cylinders), the median over its queries. Each
+/// query's time is its median over the rounds.
 pub fn against_cylinders(queries: &[QueryRuns]) -> Vec<AgainstCylinders> {
     // The SPEC maps' queries asked as `q` is (algorithm, model, seed).
     fn cylinders<'a>(queries: &'a [QueryRuns], q: &'a QueryRuns) -> impl Iterator<Item = &'a QueryRuns> {
@@ -664,12 +718,18 @@ pub fn against_cylinders(queries: &[QueryRuns]) -> Vec<AgainstCylinders> {
             c.kind == MapKind::Numerical && c.algorithm == q.algorithm && c.model == q.model && c.seed == q.seed
         })
     }
+    let as_boxes = |q: &QueryRuns| {
+        queries.iter().find(|c| {
+            c.kind == MapKind::BuildingBoxes && c.algorithm == q.algorithm && c.model == q.model && c.seed == q.seed
+        })
+    };
     let ratios = |q: &QueryRuns, pick: fn(&QueryRuns) -> &[SolveRun]| -> Option<f64> {
-        let on_cylinders = match q.kind {
-            MapKind::Voxels => {
+        let on_cylinders = match (q.kind, as_boxes(q)) {
+            (MapKind::Voxels, _) => {
                 let same = q.name.strip_prefix("voxels_")?;
                 median_micros(pick(cylinders(queries, q).find(|c| c.name.strip_prefix("numerical_") == Some(same))?))
             }
+            (MapKind::Building, Some(boxes)) => median_micros(pick(boxes)),
             _ => median(
                 &mut cylinders(queries, q)
                     .map(|c| median_micros(pick(c)))
@@ -776,7 +836,8 @@ impl Comparison {
         if !self.against_cylinders.is_empty() {
             let _ = writeln!(
                 out,
-                "\nAgainst the cylinder maps (median `micros` ratio; voxels: each map against the same SPEC map as cylinders):\n"
+                "\nAgainst the cylinder maps (median `micros` ratio; voxels: each map against the same SPEC map as \
+                 cylinders; building: against itself as boxes when `building-boxes` ran; else the SPEC maps' median):\n"
             );
             let columns = [("algorithm", l), ("maps", l), ("model", l), ("queries", r), ("baseline", r), ("new", r)];
             table::header(&mut out, &columns);
@@ -874,9 +935,17 @@ mod tests {
             q("voxels_00", MapKind::Voxels, 300.0, 100.0),
             q("voxels_01", MapKind::Voxels, 400.0, 300.0),
             q("geb079", MapKind::Octomap, 600.0, 150.0),
+            q("building", MapKind::Building, 2000.0, 1200.0),
+            q("building-boxes", MapKind::BuildingBoxes, 500.0, 400.0),
         ];
         let got = against_cylinders(&all);
-        assert_eq!(got.len(), 2, "{got:?}");
+        assert_eq!(got.len(), 3, "{got:?}");
+        let building = got.iter().find(|a| a.kind == MapKind::Building).unwrap();
+        // Against itself as boxes, not the SPEC maps.
+        assert_eq!((building.baseline, building.new), (4.0, 3.0));
+        let alone = against_cylinders(&all[..all.len() - 1]);
+        let building = alone.iter().find(|a| a.kind == MapKind::Building).unwrap();
+        assert_eq!((building.baseline, building.new), (2000.0 / 300.0, 12.0));
         let voxels = got.iter().find(|a| a.kind == MapKind::Voxels).unwrap();
         // Pairs by map: 300/100 and 400/400 against 100/50 and 300/200, not the medians' 350/300.
         assert_eq!((voxels.queries, voxels.baseline, voxels.new), (2, 2.0, 1.75));

@@ -20,7 +20,7 @@ use crate::numerical::{NumericalConfig, numerical_map};
 use dyfos_shared::math::Point3;
 use dyfos_shared::posterior::Belief;
 use dyfos_shared::scenario::Scenario;
-use dyfos_shared::world::{Bounds, CellIndex, Sun, VoxelGrid, World};
+use dyfos_shared::world::{AxisBox, Bounds, CellIndex, Obstacle, Sun, VoxelGrid, World};
 
 /// Cell side of the building, m.
 pub const RESOLUTION: f64 = 0.05;
@@ -30,6 +30,9 @@ pub const ROOM_CELLS: i64 = 100;
 pub const WALL_CELLS: i64 = 60;
 /// Doorway width and height in cells (1 m × 2 m).
 const DOOR: (i64, i64) = (20, 40);
+/// A 1.2 × 0.8 m table top at 0.75 m in each room, off centre: its cells across x
+/// and y in the room, and its layer.
+const TABLE: (std::ops::Range<i64>, std::ops::Range<i64>, i64) = (60..84, 20..36, 15);
 
 /// A square one-storey building of `side` × `side` cells.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -67,8 +70,7 @@ impl Building {
         if rj == 0 || j == self.side - 1 {
             return wall(ri);
         }
-        // A 1.2 × 0.8 m table top at 0.75 m in each room, off centre.
-        (60..84).contains(&ri) && (20..36).contains(&rj) && k == 15
+        TABLE.0.contains(&ri) && TABLE.1.contains(&rj) && k == TABLE.2
     }
 
     /// The occupied cells, in x, y, z order.
@@ -77,6 +79,50 @@ impl Building {
         (0..side).flat_map(move |i| {
             (0..side).flat_map(move |j| (0..=WALL_CELLS).filter(move |k| self.solid(i, j, *k)).map(move |k| [i, j, k]))
         })
+    }
+
+    /// The same building as boxes, each the union of a run of its cells (cell
+    /// (i, j, k) spans [i, i + 1] × [j, j + 1] × [k, k + 1] cells): the floor slab,
+    /// each wall line's pieces between doorways and the lintels above them, and the
+    /// tables. Walls cross where lines meet; the boxes overlap there. Ids from 1.
+    pub fn boxes(&self) -> Vec<(u32, Obstacle)> {
+        let cell = |c: i64| c as f64 * RESOLUTION;
+        let cube = |lo: [i64; 3], hi: [i64; 3]| {
+            Obstacle::Box(AxisBox {
+                min: Point3::new(cell(lo[0]), cell(lo[1]), cell(lo[2])),
+                max: Point3::new(cell(hi[0]), cell(hi[1]), cell(hi[2])),
+            })
+        };
+        let side = self.side;
+        let mut boxes = vec![cube([0, 0, 0], [side, side, 1])];
+        // The wall lines across x (at i) and across y (at j): ROOM_CELLS apart, and
+        // the last cell of the building.
+        let lines: Vec<i64> = (0..side).step_by(ROOM_CELLS as usize).chain([side - 1]).collect();
+        let (door_lo, door_hi) = (ROOM_CELLS / 2 - DOOR.0 / 2 + 1, ROOM_CELLS / 2 + DOOR.0 / 2);
+        for &at in &lines {
+            // Along the line, room by room: solid up to the doorway, the lintel over
+            // it, solid after it.
+            let mut pieces = Vec::new();
+            for room in (0..side).step_by(ROOM_CELLS as usize) {
+                let end = (room + ROOM_CELLS).min(side);
+                pieces.push(((room, room + door_lo), 1));
+                pieces.push(((room + door_lo, room + door_hi), DOOR.1 + 1));
+                pieces.push(((room + door_hi, end), 1));
+            }
+            for ((a, b), k) in pieces {
+                boxes.push(cube([at, a, k], [at + 1, b, WALL_CELLS + 1]));
+                boxes.push(cube([a, at, k], [b, at + 1, WALL_CELLS + 1]));
+            }
+        }
+        for a in (0..side).step_by(ROOM_CELLS as usize) {
+            for b in (0..side).step_by(ROOM_CELLS as usize) {
+                boxes.push(cube(
+                    [a + TABLE.0.start, b + TABLE.1.start, TABLE.2],
+                    [a + TABLE.0.end, b + TABLE.1.end, TABLE.2 + 1],
+                ));
+            }
+        }
+        (1..).zip(boxes).collect()
     }
 
     /// The map bounds: the building's square, cell (0, 0, 0) at the origin.
@@ -111,5 +157,33 @@ impl Building {
     pub fn room_centre(&self, a: i64, b: i64, z: f64) -> [f64; 3] {
         let c = |r: i64| (r * ROOM_CELLS + ROOM_CELLS / 2) as f64 * RESOLUTION;
         [c(a), c(b), z]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_boxes_hold_exactly_the_cells() {
+        for side in [ROOM_CELLS, 2 * ROOM_CELLS] {
+            let b = Building { side };
+            let boxes = b.boxes();
+            let inside = |i: i64, j: i64, k: i64| {
+                let c = Point3::new(i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5) * RESOLUTION;
+                boxes.iter().any(|(_, o)| match o {
+                    Obstacle::Box(x) => (0..3).all(|a| x.min[a] < c[a] && c[a] < x.max[a]),
+                    Obstacle::Cylinder(_) => false,
+                })
+            };
+            // Every layer where the building changes, and one beyond it.
+            for k in [0, 1, TABLE.2, DOOR.1, DOOR.1 + 1, WALL_CELLS, WALL_CELLS + 1] {
+                for i in 0..side {
+                    for j in 0..side {
+                        assert_eq!(inside(i, j, k), b.solid(i, j, k), "side {side}: cell ({i}, {j}, {k})");
+                    }
+                }
+            }
+        }
     }
 }

@@ -30,8 +30,14 @@ pub struct CompareArgs {
     #[arg(long, value_delimiter = ',', default_value = "paper,learned", value_parser = parse_model)]
     models: Vec<Model>,
     /// Map kinds: numerical (SPEC §10), hard, octomap (the real scan), building (a
-    /// synthetic OctoMap), voxels (SPEC §10 maps as 0.1 m grids).
-    #[arg(long, value_delimiter = ',', default_value = "numerical,hard,octomap,building,voxels", value_parser = parse_kind)]
+    /// synthetic OctoMap), voxels (SPEC §10 maps as 0.1 m grids), building-boxes (the
+    /// building as boxes, what the building is set against).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "numerical,hard,octomap,building,voxels,building-boxes",
+        value_parser = parse_kind
+    )]
     maps: Vec<MapKind>,
     /// SPEC §10 maps (seed 1); the hard maps are half as many, the voxel maps a quarter.
     #[arg(long, default_value_t = 20)]
