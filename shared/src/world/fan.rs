@@ -185,8 +185,11 @@ impl World {
             let count = (last + BUCKETS - first) % BUCKETS + 1;
             listed.push((entry, first..first + count));
         }
-        // The buckets laid out in one array: count, then place, then sort each bucket
-        // in place (the order is total: no two entries of a bucket share a leaf).
+        // The buckets laid out in one array: the entries sorted once, nearest first
+        // (the order is total: no two share a leaf), then counted and placed in that
+        // order, so that every bucket is sorted.
+        let nearest_first = |a: &Entry, b: &Entry| a.from.total_cmp(&b.from).then(a.leaf.cmp(&b.leaf));
+        listed.sort_unstable_by(|a, b| nearest_first(&a.0, &b.0));
         let mut starts = vec![0u32; BUCKETS + 1];
         let mut close = Vec::new();
         for (entry, buckets) in &listed {
@@ -208,11 +211,6 @@ impl World {
                 entries[*at as usize] = *entry;
                 *at += 1;
             }
-        }
-        let nearest_first = |a: &Entry, b: &Entry| a.from.total_cmp(&b.from).then(a.leaf.cmp(&b.leaf));
-        close.sort_unstable_by(nearest_first);
-        for b in 0..BUCKETS {
-            entries[starts[b] as usize..starts[b + 1] as usize].sort_unstable_by(nearest_first);
         }
         // Every sight line the fan serves lies within range + radius of the marker in
         // xy, padded as the footprints are; at any height within the grid.
@@ -531,6 +529,23 @@ mod tests {
         assert_eq!(bucket(1.0, 0.0), 0);
         assert_eq!(bucket(1.0, -1e-300), BUCKETS - 1);
         assert_eq!(bucket(-1.0, 0.0), BUCKETS / 2);
+    }
+
+    #[test]
+    fn every_bucket_and_the_close_list_are_nearest_first() {
+        let mut rng = Lcg(23);
+        for n in [1, 25, 75, 200] {
+            let marker = Point2::new(rng.next() * 4.0 - 2.0, rng.next() * 4.0 - 2.0);
+            let world = world_around(&mut rng, marker, 0.5, 0.3, n, true);
+            let fan = world.sight_fan(&Point3::new(marker.x, marker.y, 0.3), 0.5, 6.0);
+            let sorted = |list: &[Entry]| list.windows(2).all(|w| (w[0].from, w[0].leaf) < (w[1].from, w[1].leaf));
+            assert!(sorted(&fan.close), "n = {n}: {:?}", fan.close);
+            for b in 0..BUCKETS {
+                let bucket = &fan.entries[fan.starts[b] as usize..fan.starts[b + 1] as usize];
+                assert!(sorted(bucket), "n = {n}, bucket {b}: {bucket:?}");
+            }
+            assert!(fan.entries.len() > n, "n = {n}: {} entries", fan.entries.len());
+        }
     }
 
     /// A map of cylinders and boxes around the marker, some with footprints just
