@@ -308,13 +308,15 @@ impl Brute {
                 }
                 None => lupp.nearby(),
             };
+            // Nothing near the box holding the arc's stars: no star touches anything.
+            let collision_clear = span.is_some() && near.is_empty();
             // A voxel grid is listed in every direction of the sight fan: when
             // nothing solid is near the arc's sight lines, skip them all.
             let sight_clear = sight_span.is_some_and(|(lo, hi)| world.box_is_clear(&lo, &hi));
             let turns = &plan.turns[a * ARC..];
             for (k, ((pose, in_workspace), frame)) in row.poses.iter().zip(frames).enumerate() {
                 let x = SensorState { rho, psi, phi, yaw: frame.yaw };
-                let facts = PoseFacts { in_workspace: *in_workspace, turn: turns[k], sight_clear };
+                let facts = PoseFacts { in_workspace: *in_workspace, turn: turns[k], collision_clear, sight_clear };
                 match eval.evaluate_with(&x, |l| l.evaluate_pose_below(pose, &facts, near, &kept.bound)) {
                     None => return false,
                     Some(Evaluation::Feasible { cost }) if !cost.is_nan() => kept.found(first + a * ARC + k, cost),

@@ -145,14 +145,16 @@ impl World {
             if misses(b, lo, hi) {
                 continue;
             }
+            let leaf = &self.leaves[*leaf_id as usize];
             // The grid's box is large: skip it when no occupied cell is near the star,
-            // before making the batch.
-            if let Leaf::Voxels = self.leaves[*leaf_id as usize]
+            // before making the batch (a map without a grid has no such leaf).
+            if self.voxels.is_some()
+                && let Leaf::Voxels = leaf
                 && !self.voxels_may_touch_near(&near.bricks, lo, hi)
             {
                 continue;
             }
-            match decide(&self.leaves[*leaf_id as usize]) {
+            match decide(leaf) {
                 Some(true) => return true,
                 Some(false) => continue,
                 None => {}
