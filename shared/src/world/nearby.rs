@@ -83,8 +83,10 @@ impl World {
         into.leaves.clear();
         // The grid's box is large: it stays listed only when an occupied cell may be
         // near the box (then each star is checked again, as for any list).
+        let grid = self.voxels.is_some();
         let meets = |b: &[f64; 6], leaf: u32| {
-            !misses(b, lo, hi) && (!matches!(self.leaves[leaf as usize], Leaf::Voxels) || self.voxels_may_touch(lo, hi))
+            !misses(b, lo, hi)
+                && (!grid || !matches!(self.leaves[leaf as usize], Leaf::Voxels) || self.voxels_may_touch(lo, hi))
         };
         let inside = (0..3).all(|a| from.lo[a] <= lo[a] && hi[a] <= from.hi[a]);
         if inside && !from.crowded {
