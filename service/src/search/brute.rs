@@ -11,7 +11,8 @@
 //! - the 72 yaws of one (ρ, ψ, φ) put the viewer on a circle: the query's list of
 //!   obstacles near any collision star is narrowed once per arc of `ARC` yaws to
 //!   those near the box around the arc's stars ([`dyfos_shared::world::World::nearby_within`]), so each
-//!   star is compared with the few boxes left (mostly none); the sight lines go
+//!   star is compared with the few boxes left (an arc with none left skips its
+//!   stars: [`PoseFacts`]'s `collision_clear`); the sight lines go
 //!   through the query's sight fan, as for any candidate, but on a map with a
 //!   voxel grid (listed in every direction of the fan) an arc whose sight lines
 //!   have nothing solid near ([`dyfos_shared::world::World::box_is_clear`]) skips them;
