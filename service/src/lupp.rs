@@ -114,6 +114,10 @@ pub struct PoseFacts {
     pub in_workspace: bool,
     /// `viewer_yaw.sin_cos()`, for its collision star's segments.
     pub turn: (f64, f64),
+    /// Whether nothing is near its collision star, as proved by an empty
+    /// [`World::nearby_within`] list of a box holding [`Lupp::collision_box`]: the
+    /// star is not checked.
+    pub collision_clear: bool,
     /// Whether nothing solid is near its sight lines, as proved by e.g.
     /// [`World::box_is_clear`] on a box holding [`Lupp::sight_box`]: they are skipped.
     pub sight_clear: bool,
@@ -250,7 +254,7 @@ impl<'a> Lupp<'a> {
     ) -> Evaluation {
         let why = if !facts.in_workspace {
             Some(Violation::Workspace)
-        } else if self.world.star_contact_near_turned(near, &self.star(pose), facts.turn) {
+        } else if !facts.collision_clear && self.world.star_contact_near_turned(near, &self.star(pose), facts.turn) {
             Some(Violation::Collision)
         } else if self.occluded(pose, facts.sight_clear) {
             Some(Violation::Occlusion)

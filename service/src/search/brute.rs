@@ -11,7 +11,8 @@
 //! - the 72 yaws of one (ρ, ψ, φ) put the viewer on a circle: the query's list of
 //!   obstacles near any collision star is narrowed once per arc of `ARC` yaws to
 //!   those near the box around the arc's stars ([`dyfos_shared::world::World::nearby_within`]), so each
-//!   star is compared with the few boxes left (mostly none); the sight lines go
+//!   star is compared with the few boxes left (an arc with none left skips its
+//!   stars: [`PoseFacts`]'s `collision_clear`); the sight lines go
 //!   through the query's sight fan, as for any candidate, but on a map with a
 //!   voxel grid (listed in every direction of the fan) an arc whose sight lines
 //!   have nothing solid near ([`dyfos_shared::world::World::box_is_clear`]) skips them;
@@ -308,13 +309,15 @@ impl Brute {
                 }
                 None => lupp.nearby(),
             };
+            // Nothing near the box holding the arc's stars: no star touches anything.
+            let collision_clear = span.is_some() && near.is_empty();
             // A voxel grid is listed in every direction of the sight fan: when
             // nothing solid is near the arc's sight lines, skip them all.
             let sight_clear = sight_span.is_some_and(|(lo, hi)| world.box_is_clear(&lo, &hi));
             let turns = &plan.turns[a * ARC..];
             for (k, ((pose, in_workspace), frame)) in row.poses.iter().zip(frames).enumerate() {
                 let x = SensorState { rho, psi, phi, yaw: frame.yaw };
-                let facts = PoseFacts { in_workspace: *in_workspace, turn: turns[k], sight_clear };
+                let facts = PoseFacts { in_workspace: *in_workspace, turn: turns[k], collision_clear, sight_clear };
                 match eval.evaluate_with(&x, |l| l.evaluate_pose_below(pose, &facts, near, &kept.bound)) {
                     None => return false,
                     Some(Evaluation::Feasible { cost }) if !cost.is_nan() => kept.found(first + a * ARC + k, cost),

@@ -83,8 +83,10 @@ impl World {
         into.leaves.clear();
         // The grid's box is large: it stays listed only when an occupied cell may be
         // near the box (then each star is checked again, as for any list).
+        let grid = self.voxels.is_some();
         let meets = |b: &[f64; 6], leaf: u32| {
-            !misses(b, lo, hi) && (!matches!(self.leaves[leaf as usize], Leaf::Voxels) || self.voxels_may_touch(lo, hi))
+            !misses(b, lo, hi)
+                && (!grid || !matches!(self.leaves[leaf as usize], Leaf::Voxels) || self.voxels_may_touch(lo, hi))
         };
         let inside = (0..3).all(|a| from.lo[a] <= lo[a] && hi[a] <= from.hi[a]);
         if inside && !from.crowded {
@@ -145,14 +147,16 @@ impl World {
             if misses(b, lo, hi) {
                 continue;
             }
+            let leaf = &self.leaves[*leaf_id as usize];
             // The grid's box is large: skip it when no occupied cell is near the star,
-            // before making the batch.
-            if let Leaf::Voxels = self.leaves[*leaf_id as usize]
+            // before making the batch (a map without a grid has no such leaf).
+            if self.voxels.is_some()
+                && let Leaf::Voxels = leaf
                 && !self.voxels_may_touch_near(&near.bricks, lo, hi)
             {
                 continue;
             }
-            match decide(&self.leaves[*leaf_id as usize]) {
+            match decide(leaf) {
                 Some(true) => return true,
                 Some(false) => continue,
                 None => {}
@@ -260,6 +264,65 @@ mod tests {
     fn a_short_list_of_boxes_too_small_disagrees_with_the_scan() {
         let (wrong, _, _) = disagreements(1e-6);
         assert!(wrong > 0, "the cases never graze a box");
+    }
+
+    /// Over stars placed anywhere and grazing obstacles, with the list narrowed to
+    /// each star's cube grown by `grow` (negative: a box that does not hold the
+    /// star): the stars whose list is empty that touch something, and the stars
+    /// whose list is empty.
+    fn empty_lists_that_touch(grow: f64) -> (usize, usize) {
+        let mut rng = Lcg(23);
+        let (mut wrong, mut empty) = (0, 0);
+        for (n, voxels) in [(12, false), (25, false), (80, false), (10, true)] {
+            let world = random_world(&mut rng, n, voxels);
+            let near = world.nearby(&Point3::new(-12.0, -12.0, -2.0), &Point3::new(12.0, 12.0, 6.0));
+            let obstacles: Vec<Obstacle> = world.obstacles().values().copied().collect();
+            let mut narrow = Nearby::default();
+            let reach = 0.6;
+            for k in 0..6000 {
+                // Grazing: the +x ray ends 1e-9 inside a cylinder's side or a box's.
+                let (p, yaw) = match obstacles.get(k % obstacles.len().max(1)).filter(|_| k % 2 == 0) {
+                    Some(Obstacle::Cylinder(c)) => {
+                        (Point3::new(c.center.x - c.radius - reach + 1e-9, c.center.y, rng.next() * c.height), 0.0)
+                    }
+                    Some(Obstacle::Box(b)) => {
+                        let y = b.min.y + rng.next() * (b.max.y - b.min.y);
+                        (Point3::new(b.min.x - reach + 1e-9, y, b.min.z + rng.next() * (b.max.z - b.min.z)), 0.0)
+                    }
+                    None => {
+                        let p = Point3::new(rng.next() * 20.0 - 10.0, rng.next() * 20.0 - 10.0, rng.next() * 3.0);
+                        (p, rng.next() * TAU)
+                    }
+                };
+                let (rays, lo, hi) = star(p, yaw, reach);
+                let g = Vector3::repeat(grow);
+                world.nearby_within(&near, &(lo - g), &(hi + g), &mut narrow);
+                if narrow.is_empty() {
+                    empty += 1;
+                    wrong += usize::from(world.any_contact_by_scan(&rays));
+                }
+            }
+        }
+        (wrong, empty)
+    }
+
+    /// An empty list narrowed to a box holding a star proves that the star
+    /// touches nothing (a search skips the star then).
+    #[test]
+    fn an_empty_list_around_a_star_means_no_contact() {
+        for grow in [0.0, 0.4] {
+            let (wrong, empty) = empty_lists_that_touch(grow);
+            assert_eq!(wrong, 0, "grown by {grow}");
+            assert!(empty > 2000, "{empty} empty lists: the test tests little");
+        }
+    }
+
+    /// The test above can fail: a box 1e-3 m short of the star's cube leaves out
+    /// obstacles the star touches.
+    #[test]
+    fn an_empty_list_short_of_the_star_misses_contacts() {
+        let (wrong, _) = empty_lists_that_touch(-1e-3);
+        assert!(wrong > 0, "the cases never graze an obstacle");
     }
 
     /// A batch outside the region, or a crowded region, is answered by the BVH.
