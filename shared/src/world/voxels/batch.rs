@@ -23,21 +23,16 @@ const BATCH_NODES: i64 = 16;
 /// Most boxes gathered for a batch.
 const BATCH_BOXES: usize = 40;
 
-/// The cover boxes near a batch, in metres.
-struct Gathered {
-    regions: [Region; BATCH_BOXES],
-    len: usize,
-}
-
 impl VoxelGrid {
     /// Whether any of `segments` touches an occupied cell up to its own end, for
     /// segments of a query whose bricks near them are `near`: the verdict of
     /// [`VoxelGrid::first_contact_near`] on each of them, the same answer.
     pub fn any_contact_near(&self, segments: &[Segment], near: &NearBricks) -> bool {
-        let gathered = self.covers_near(segments);
+        let mut regions = [Region::default(); BATCH_BOXES];
+        let gathered = self.covers_near(segments, &mut regions).map(|n| &regions[..n]);
         segments.iter().any(|s| {
-            if let Some(g) = &gathered
-                && self.clears_all(s, &g.regions[..g.len])
+            if let Some(regions) = gathered
+                && self.clears_all(s, 0.0, s.length.max(0.0), regions)
             {
                 return false;
             }
@@ -45,20 +40,20 @@ impl VoxelGrid {
         })
     }
 
-    /// Whether `seg`, over `[0, length]`, stays more than the clearance margin away
-    /// from every box of `regions`.
+    /// Whether the part `[t0, t1]` of `seg` stays more than the clearance margin
+    /// away from every box of `regions`.
     #[inline]
-    fn clears_all(&self, seg: &Segment, regions: &[Region]) -> bool {
+    fn clears_all(&self, seg: &Segment, t0: f64, t1: f64, regions: &[Region]) -> bool {
         let inv_dir = [1.0 / seg.dir[0], 1.0 / seg.dir[1], 1.0 / seg.dir[2]];
         let clearance = Clearance::new(self.resolution, self.origin, seg, inv_dir, true);
-        let tb = seg.length.max(0.0);
-        clearance.enabled() && regions.iter().all(|r| clearance.clears_region(seg, 0.0, tb, r))
+        clearance.enabled() && regions.iter().all(|r| clearance.clears_region(seg, t0, t1, r))
     }
 
     /// The boxes of the covers of the nodes near `segments` that meet the cells
     /// within a cell of the segments' box; `None` when the box is not finite, or
     /// the nodes or boxes are too many (then each segment gets the exact test).
-    fn covers_near(&self, segments: &[Segment]) -> Option<Gathered> {
+    /// Written to `regions`; how many.
+    fn covers_near(&self, segments: &[Segment], regions: &mut [Region; BATCH_BOXES]) -> Option<usize> {
         let (cells_lo, cells_end) = self.tree.bounds()?;
         let first = segments.first()?;
         let (mut lo, mut hi) = (first.origin, first.origin);
@@ -70,7 +65,7 @@ impl VoxelGrid {
             }
         }
         let inv_resolution = 1.0 / self.resolution;
-        let mut gathered = Gathered { regions: [Region::default(); BATCH_BOXES], len: 0 };
+        let mut len = 0;
         let (mut first, mut last) = ([0i64; 3], [0i64; 3]);
         for a in 0..3 {
             // The cells near the box, one more on each side for rounding.
@@ -81,7 +76,7 @@ impl VoxelGrid {
             }
             (first[a], last[a]) = (l.max((cells_lo[a] - 1) as f64) as i64, h.min(cells_end[a] as f64) as i64);
             if first[a] > last[a] {
-                return Some(gathered);
+                return Some(0);
             }
         }
         let nodes = (0..3).map(|a| (last[a] >> NODE_SHIFT) - (first[a] >> NODE_SHIFT) + 1).product::<i64>();
@@ -98,15 +93,15 @@ impl VoxelGrid {
                         if (0..3).any(|a| b.hi[a] < first[a] || b.lo[a] > last[a]) {
                             continue;
                         }
-                        if gathered.len == BATCH_BOXES {
+                        if len == BATCH_BOXES {
                             return None;
                         }
-                        gathered.regions[gathered.len] = Region::of(self.resolution, &self.origin, &b);
-                        gathered.len += 1;
+                        regions[len] = Region::of(self.resolution, &self.origin, &b);
+                        len += 1;
                     }
                 }
             }
         }
-        Some(gathered)
+        Some(len)
     }
 }
