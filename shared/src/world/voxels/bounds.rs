@@ -158,8 +158,8 @@ impl Clearance {
 /// A box of cells in metres, grown by the clearance margin ([`Clearance::region`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(super) struct Region {
-    lo: [f64; 3],
-    hi: [f64; 3],
+    pub(super) lo: [f64; 3],
+    pub(super) hi: [f64; 3],
 }
 
 impl Region {
