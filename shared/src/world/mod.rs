@@ -363,9 +363,7 @@ impl World {
     #[inline]
     fn leaf_touches_near(&self, leaf: u32, segments: &[Segment], near: &NearBricks) -> bool {
         match (&self.leaves[leaf as usize], &self.voxels) {
-            (Leaf::Voxels, Some(v)) => {
-                segments.iter().any(|s| v.first_contact_near(s, near).is_some_and(|t| s.reaches(t)))
-            }
+            (Leaf::Voxels, Some(v)) => v.any_contact_near(segments, near),
             _ => self.leaf_touches(leaf, segments),
         }
     }

@@ -71,8 +71,6 @@ pub(super) struct CellBox {
 pub(super) struct Clearance {
     resolution: f64,
     origin: Point3<f64>,
-    /// How far from the box the part must stay, m.
-    margin: f64,
     /// 1 / the segment's direction: no division per block.
     inv_dir: [f64; 3],
     /// Whether the test may decide at all (see [`Clearance::new`]).
@@ -106,7 +104,7 @@ impl Clearance {
             && scale.is_finite()
             && resolution.is_finite()
             && scale * (-24f64).exp2() <= resolution;
-        Clearance { resolution, origin, margin: MARGIN_CELLS * resolution, inv_dir, enabled }
+        Clearance { resolution, origin, inv_dir, enabled }
     }
 
     /// Whether the test decides at all.
@@ -118,14 +116,26 @@ impl Clearance {
     /// every cell of `cells` (closed cubes): then no walk over that part touches one.
     #[inline]
     pub(super) fn clears(&self, seg: &Segment, ta: f64, tb: f64, cells: &CellBox) -> bool {
+        self.clears_region(seg, ta, tb, &self.region(cells))
+    }
+
+    /// The cells of `cells` in metres, grown by the margin: what [`Clearance::clears`]
+    /// tests a segment against.
+    #[inline]
+    pub(super) fn region(&self, cells: &CellBox) -> Region {
+        Region::of(self.resolution, &self.origin, cells)
+    }
+
+    /// [`Clearance::clears`] against a box already in metres ([`Clearance::region`]).
+    #[inline]
+    pub(super) fn clears_region(&self, seg: &Segment, ta: f64, tb: f64, region: &Region) -> bool {
         // Every comparison below is one that NaN fails, so NaN never clears.
         if !(self.enabled && ta.is_finite() && tb.is_finite()) {
             return false;
         }
         let (mut t0, mut t1) = (ta, tb.max(ta));
         for a in 0..3 {
-            let lo = self.origin[a] + cells.lo[a] as f64 * self.resolution - self.margin;
-            let hi = self.origin[a] + (cells.hi[a] + 1) as f64 * self.resolution + self.margin;
+            let (lo, hi) = (region.lo[a], region.hi[a]);
             let (o, d) = (seg.origin[a], seg.dir[a]);
             let outside = if d == 0.0 {
                 o < lo || o > hi
@@ -142,6 +152,26 @@ impl Clearance {
             }
         }
         false
+    }
+}
+
+/// A box of cells in metres, grown by the clearance margin ([`Clearance::region`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct Region {
+    pub(super) lo: [f64; 3],
+    pub(super) hi: [f64; 3],
+}
+
+impl Region {
+    /// The closed cubes of `cells` in a grid of `resolution` at `origin`, grown by
+    /// [`MARGIN_CELLS`].
+    #[inline]
+    pub(super) fn of(resolution: f64, origin: &Point3<f64>, cells: &CellBox) -> Region {
+        let margin = MARGIN_CELLS * resolution;
+        Region {
+            lo: std::array::from_fn(|a| origin[a] + cells.lo[a] as f64 * resolution - margin),
+            hi: std::array::from_fn(|a| origin[a] + (cells.hi[a] + 1) as f64 * resolution + margin),
+        }
     }
 }
 

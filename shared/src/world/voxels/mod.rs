@@ -18,6 +18,7 @@
 //! assert_eq!(grid.first_contact(&ray), Some(2.0));
 //! ```
 
+mod batch;
 mod bounds;
 mod cover;
 mod near;

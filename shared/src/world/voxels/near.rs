@@ -191,7 +191,7 @@ impl VoxelGrid {
     /// are all empty: `false` only when no occupied cell's closed cube meets the box.
     #[inline]
     pub fn may_touch_box_near(&self, near: &NearBricks, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
-        self.may_touch_box_near_within(near, lo, hi, 512)
+        self.may_touch_box_near_within(near, lo, hi, 16)
     }
 
     /// [`VoxelGrid::may_touch_box_near`] with at most `budget` node and brick
