@@ -169,8 +169,8 @@ impl World {
                 continue;
             }
             let entry = Entry { from, leaf: i as u32 };
-            // Not `d <= reach`: a NaN is listed everywhere.
-            if !(d > reach) {
+            // A NaN is listed everywhere.
+            if d <= reach || d.is_nan() {
                 listed.push((entry, 0..BUCKETS));
                 continue;
             }
