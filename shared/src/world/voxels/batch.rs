@@ -61,15 +61,7 @@ impl VoxelGrid {
     /// Written to `regions`; how many.
     fn covers_near(&self, segments: &[Segment], regions: &mut [Region; BATCH_BOXES]) -> Option<usize> {
         let (cells_lo, cells_end) = self.tree.bounds()?;
-        let first = segments.first()?;
-        let (mut lo, mut hi) = (first.origin, first.origin);
-        for s in segments {
-            let end = s.point_at(s.length.max(0.0));
-            for p in [s.origin, end] {
-                lo = lo.inf(&p);
-                hi = hi.sup(&p);
-            }
-        }
+        let (lo, hi) = crate::world::span(segments)?;
         let inv_resolution = 1.0 / self.resolution;
         let mut len = 0;
         let (mut first, mut last) = ([0i64; 3], [0i64; 3]);
