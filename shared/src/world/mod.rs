@@ -6,9 +6,10 @@
 //! makes map updates atomic for the daemon. Queries go through a bounding-volume
 //! hierarchy (parry's `Bvh`) whose leaves are the obstacles, plus one leaf for the
 //! voxel grid, each tested exactly; a world of at most [`SCAN_LEAVES`] leaves is
-//! scanned leaf by leaf instead, with the same verdicts. A search's per-candidate queries go through two
-//! per-query indexes over the same leaves instead, with the same verdicts: the
-//! leaves near every collision star ([`Nearby`]) and the sight fan ([`SightFan`]).
+//! scanned leaf by leaf instead, with the same verdicts. A search's per-candidate
+//! queries go through two per-query indexes over the same leaves instead, with the
+//! same verdicts: the leaves near every collision star ([`Nearby`]) and the sight
+//! fan ([`SightFan`]).
 //!
 //! ```
 //! use dyfos_shared::world::{Bounds, MapDelta, Obstacle, Segment, Sun, VerticalCylinder, World};
