@@ -441,27 +441,28 @@ pub fn scenario(path: &str) -> dyfos_shared::scenario::Scenario {
     dyfos_shared::scenario::Scenario::from_json(&text).unwrap_or_else(|e| panic!("scenario {path}: {e}"))
 }
 
-/// A scenario whose searches take seconds (for tests about what happens while searches
-/// run): `hard_01` with 4096 perimeter points (SPEC's most, 4097 sight lines a
-/// candidate) and a 5 cm voxel layer just below the marker's height under the whole
-/// search space, which every sight line passes close to.
+/// A scenario whose searches take long (for tests about what happens while searches
+/// run; a `dyfos` query most of a second, a `brute` one minutes): `hard_01` with 4096
+/// perimeter points (SPEC's most, 4097 sight lines a candidate) and a 5 cm voxel layer
+/// under the whole search space whose top every sight line ends just above.
 pub fn slow_search_scenario() -> dyfos_shared::scenario::Scenario {
     use dyfos_shared::world::MapDelta;
     let text = std::fs::read_to_string(data("golden/scenarios/hard/hard_01.json")).expect("hard_01");
     let mut s = dyfos_shared::scenario::Scenario::from_json(&text).expect("hard_01 parses");
     s.params.perimeter_points = dyfos_shared::limits::MAX_PERIMETER_POINTS;
-    // A layer of cells 10–15 cm above the ground under the whole search space: every
-    // sight line ends 5 cm above it (the marker is at 20 cm), so none is blocked but
-    // each walks the layer's blocks near its end, where no box test can settle it;
-    // two cells at opposite corners make the grid's box span the whole search space,
-    // so no sight line is clipped away before its walk.
+    // A layer of cells 15–20 cm above the ground under the whole search space, and
+    // the marker 1 µm above its top: no sight line is blocked, but each ends closer to
+    // the layer than any box test can settle (a thousandth of a cell), so each walks
+    // the layer's cells near its end; two cells at opposite corners make the grid's
+    // box span the whole search space, so no sight line is clipped away before its walk.
+    s.params.marker_height = 0.2 + 1e-6;
     let resolution = 0.05;
     let (side, top) = ((24.0 / resolution) as i64, (12.0 / resolution) as i64);
     let voxels = MapDelta::SetVoxels {
         resolution,
         origin: dyfos_shared::math::Point3::new(-12.0, -12.0, 0.0),
         cells: (0..side)
-            .flat_map(|x| (0..side).map(move |y| [x, y, 2]))
+            .flat_map(|x| (0..side).map(move |y| [x, y, 3]))
             .chain([[0, 0, 0], [side - 1, side - 1, top - 1]])
             .collect(),
         occupied: true,
