@@ -224,26 +224,47 @@ mod tests {
     use crate::world::{Obstacle, Segment};
     use std::f64::consts::TAU;
 
-    /// The exact test on the lines [`Segment::sight_line`] makes.
-    fn exact(c: &VerticalCylinder, sensor: &Point3<f64>, targets: &[Point3<f64>]) -> bool {
-        targets
-            .iter()
-            .filter_map(|q| Segment::sight_line(sensor, q, 1e-6))
-            .any(|s| c.first_contact(&s).is_some_and(|t| s.reaches(t)))
+    /// Verdicts that differ from the exact test's, hits and misses given.
+    #[derive(Default)]
+    struct Tally {
+        wrong: usize,
+        hits: usize,
+        misses: usize,
     }
 
-    /// The box holding the sensor and the targets.
-    fn span(sensor: &Point3<f64>, targets: &[Point3<f64>]) -> (Point3<f64>, Point3<f64>) {
-        targets.iter().fold((*sensor, *sensor), |(lo, hi), q| (lo.inf(q), hi.sup(q)))
+    impl Tally {
+        /// Counts the verdict by `pad` of `shape` (which is `solid`) on the lines from
+        /// `sensor` to the first target, then to all of `targets`, against the exact
+        /// test on the lines [`Segment::sight_line`] makes.
+        fn add(
+            &mut self,
+            shape: &impl SightPath,
+            solid: Obstacle,
+            sensor: &Point3<f64>,
+            targets: &[Point3<f64>],
+            pad: (f64, f64),
+        ) {
+            for targets in [&targets[..1], targets] {
+                let want = targets
+                    .iter()
+                    .filter_map(|q| Segment::sight_line(sensor, q, 1e-6))
+                    .any(|s| solid.first_contact(&s).is_some_and(|t| s.reaches(t)));
+                let (lo, hi) = targets.iter().fold((*sensor, *sensor), |(lo, hi), q| (lo.inf(q), hi.sup(q)));
+                if let Some(got) = shape.touches_sight_lines_by(sensor, targets, 1e-6, &lo, &hi, pad) {
+                    self.wrong += usize::from(got != want);
+                    if got { self.hits += 1 } else { self.misses += 1 }
+                }
+            }
+        }
     }
 
     /// Counts the verdicts that differ from the exact test's, and the hits and
     /// misses given, over sensors and targets placed so that lines graze the
     /// cylinder's side, pass its top edge, end at its surface, start inside it, or
     /// run vertically or horizontally, each give or take a hair; and anywhere.
-    fn disagreements(pad: (f64, f64)) -> (usize, usize, usize) {
+    fn disagreements(pad: (f64, f64)) -> Tally {
         let mut rng = Lcg(23);
-        let (mut wrong, mut hits, mut misses) = (0, 0, 0);
+        let mut tally = Tally::default();
         let hair = |rng: &mut Lcg| (rng.next() - 0.5) * 4e-6;
         for _ in 0..300 {
             let c = VerticalCylinder {
@@ -293,23 +314,16 @@ mod tests {
                 };
                 // The line alone, and with targets around the sensor's own.
                 let others = [target, at(rng.next() * TAU, r + 1.0 + rng.next() * 5.0, rng.next())];
-                for targets in [&others[..1], &others[..]] {
-                    let want = exact(&c, &sensor, targets);
-                    let (lo, hi) = span(&sensor, targets);
-                    if let Some(got) = c.touches_sight_lines_by(&sensor, targets, 1e-6, &lo, &hi, pad) {
-                        wrong += usize::from(got != want);
-                        if got { hits += 1 } else { misses += 1 }
-                    }
-                }
+                tally.add(&c, Obstacle::Cylinder(c), &sensor, &others, pad);
             }
         }
-        (wrong, hits, misses)
+        tally
     }
 
     /// The verdicts are the exact test's, and decide most lines.
     #[test]
     fn a_cylinders_sight_line_verdicts_are_the_exact_tests() {
-        let (wrong, hits, misses) = disagreements(PAD);
+        let Tally { wrong, hits, misses } = disagreements(PAD);
         assert_eq!(wrong, 0);
         assert!(hits > 30_000 && misses > 30_000, "{hits} hits, {misses} misses: the test tests little");
     }
@@ -318,7 +332,7 @@ mod tests {
     /// loose), the grazing lines get verdicts the exact test contradicts.
     #[test]
     fn sight_line_verdicts_past_the_bounds_disagree_with_the_exact_test() {
-        let (wrong, _, _) = disagreements((-PAD.0, 0.0));
+        let wrong = disagreements((-PAD.0, 0.0)).wrong;
         assert!(wrong > 0, "the cases never graze a bound");
     }
 
@@ -326,9 +340,9 @@ mod tests {
     /// misses given, over lines through a point on a face, an edge or a corner of
     /// the box (give or take a hair) from outside, ending at a face, starting
     /// inside, parallel to an axis; and boxes thinner than the pad.
-    fn box_disagreements(pad: (f64, f64)) -> (usize, usize, usize) {
+    fn box_disagreements(pad: (f64, f64)) -> Tally {
         let mut rng = Lcg(31);
-        let (mut wrong, mut hits, mut misses) = (0, 0, 0);
+        let mut tally = Tally::default();
         let hair = |rng: &mut Lcg| (rng.next() - 0.5) * 4e-6;
         for i in 0..300 {
             let min = Point3::new(rng.next() * 40.0 - 20.0, rng.next() * 40.0 - 20.0, rng.next() * 3.0);
@@ -389,26 +403,16 @@ mod tests {
                 };
                 let p = on_surface(&mut rng);
                 let others = [target, away(&mut rng, &p)];
-                for targets in [&others[..1], &others[..]] {
-                    let want = targets
-                        .iter()
-                        .filter_map(|q| Segment::sight_line(&sensor, q, 1e-6))
-                        .any(|s| Obstacle::Box(b).first_contact(&s).is_some_and(|t| s.reaches(t)));
-                    let (lo, hi) = span(&sensor, targets);
-                    if let Some(got) = b.touches_sight_lines_by(&sensor, targets, 1e-6, &lo, &hi, pad) {
-                        wrong += usize::from(got != want);
-                        if got { hits += 1 } else { misses += 1 }
-                    }
-                }
+                tally.add(&b, Obstacle::Box(b), &sensor, &others, pad);
             }
         }
-        (wrong, hits, misses)
+        tally
     }
 
     /// The box verdicts are the exact test's, and decide most lines.
     #[test]
     fn a_boxs_sight_line_verdicts_are_the_exact_tests() {
-        let (wrong, hits, misses) = box_disagreements(PAD);
+        let Tally { wrong, hits, misses } = box_disagreements(PAD);
         assert_eq!(wrong, 0);
         assert!(hits > 30_000 && misses > 20_000, "{hits} hits, {misses} misses: the test tests little");
     }
@@ -417,7 +421,7 @@ mod tests {
     /// box verdicts the exact test contradicts.
     #[test]
     fn box_verdicts_past_the_bounds_disagree_with_the_exact_test() {
-        let (wrong, _, _) = box_disagreements((-PAD.0, 0.0));
+        let wrong = box_disagreements((-PAD.0, 0.0)).wrong;
         assert!(wrong > 0, "the cases never graze a bound");
     }
 
