@@ -344,6 +344,11 @@ pub struct SolveRun {
     pub answer: AnswerBits,
 }
 
+/// The `dyfosd` beside `dyfos`.
+fn dyfosd_beside(dyfos: &Path) -> PathBuf {
+    dyfos.with_file_name(format!("dyfosd{}", std::env::consts::EXE_SUFFIX))
+}
+
 /// The `dyfos` binary in `dir`, or an error saying what is missing.
 pub fn dyfos_in(dir: &Path) -> anyhow::Result<PathBuf> {
     let path = dir.join(format!("dyfos{}", std::env::consts::EXE_SUFFIX));
@@ -374,7 +379,7 @@ impl BuildCopy {
         let into = std::env::temp_dir().join(format!("cmp{}{tag}bin", std::process::id()));
         std::fs::create_dir_all(&into).with_context(|| format!("cannot create {}", into.display()))?;
         let copy = BuildCopy { dyfos: into.join(dyfos.file_name().unwrap_or_default()), dir: into };
-        let dyfosd = dyfos.with_file_name(format!("dyfosd{}", std::env::consts::EXE_SUFFIX));
+        let dyfosd = dyfosd_beside(&dyfos);
         for from in [&dyfos, &dyfosd] {
             if from.is_file() {
                 let to = copy.dir.join(from.file_name().unwrap_or_default());
@@ -406,7 +411,7 @@ impl BuildDaemon {
     /// Starts the `dyfosd` beside `dyfos` (with the learned model `model`, if any)
     /// and waits until it answers `dyfos stats`.
     pub fn start(dyfos: &Path, tag: &str, model: Option<&Path>) -> anyhow::Result<Self> {
-        let dyfosd = dyfos.with_file_name(format!("dyfosd{}", std::env::consts::EXE_SUFFIX));
+        let dyfosd = dyfosd_beside(dyfos);
         let name = format!("cmp{}{tag}", std::process::id());
         let dir = std::env::temp_dir().join(&name);
         std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -712,26 +717,24 @@ pub struct AgainstCylinders {
 /// its seed (there is no same scene in cylinders), the median over its queries. Each
 /// query's time is its median over the rounds.
 pub fn against_cylinders(queries: &[QueryRuns]) -> Vec<AgainstCylinders> {
-    // The SPEC maps' queries asked as `q` is (algorithm, model, seed).
-    fn cylinders<'a>(queries: &'a [QueryRuns], q: &'a QueryRuns) -> impl Iterator<Item = &'a QueryRuns> {
-        queries.iter().filter(move |c| {
-            c.kind == MapKind::Numerical && c.algorithm == q.algorithm && c.model == q.model && c.seed == q.seed
-        })
+    // The queries of maps of `kind` asked as `q` is (algorithm, model, seed).
+    fn asked_as<'a>(queries: &'a [QueryRuns], q: &'a QueryRuns, kind: MapKind) -> impl Iterator<Item = &'a QueryRuns> {
+        queries
+            .iter()
+            .filter(move |c| c.kind == kind && c.algorithm == q.algorithm && c.model == q.model && c.seed == q.seed)
     }
-    let as_boxes = |q: &QueryRuns| {
-        queries.iter().find(|c| {
-            c.kind == MapKind::BuildingBoxes && c.algorithm == q.algorithm && c.model == q.model && c.seed == q.seed
-        })
-    };
     let ratios = |q: &QueryRuns, pick: fn(&QueryRuns) -> &[SolveRun]| -> Option<f64> {
-        let on_cylinders = match (q.kind, as_boxes(q)) {
+        let on_cylinders = match (q.kind, asked_as(queries, q, MapKind::BuildingBoxes).next()) {
             (MapKind::Voxels, _) => {
                 let same = q.name.strip_prefix("voxels_")?;
-                median_micros(pick(cylinders(queries, q).find(|c| c.name.strip_prefix("numerical_") == Some(same))?))
+                median_micros(pick(
+                    asked_as(queries, q, MapKind::Numerical)
+                        .find(|c| c.name.strip_prefix("numerical_") == Some(same))?,
+                ))
             }
             (MapKind::Building, Some(boxes)) => median_micros(pick(boxes)),
             _ => median(
-                &mut cylinders(queries, q)
+                &mut asked_as(queries, q, MapKind::Numerical)
                     .map(|c| median_micros(pick(c)))
                     .filter(|m| m.is_finite())
                     .collect::<Vec<_>>(),
