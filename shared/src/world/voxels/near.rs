@@ -235,6 +235,23 @@ mod tests {
         grid.tree.any_in_box(first, last, u32::MAX).expect("within budget")
     }
 
+    /// `count` square columns of cells from the floor up, each within `spread`
+    /// cells of the origin, up to `side` cells wide and `top` high.
+    fn columns(rng: &mut Lcg, count: usize, spread: i64, side: i64, top: i64) -> Vec<CellIndex> {
+        let mut cells = Vec::new();
+        for _ in 0..count {
+            let at = |rng: &mut Lcg| (rng.next() * (2 * spread) as f64) as i64 - spread;
+            let (x, y) = (at(rng), at(rng));
+            let (side, top) = ((rng.next() * side as f64) as i64 + 1, (rng.next() * top as f64) as i64 + 1);
+            for i in 0..side {
+                for j in 0..side {
+                    cells.extend((0..top).map(|k| [x + i, y + j, k]));
+                }
+            }
+        }
+        cells
+    }
+
     /// Counts the boxes the bits call empty where a cell touches them, over grids
     /// of columns, a floor (or not) and scattered cells, and boxes from a cell's
     /// size to wider than the region, inside it and across its edges; and the
@@ -245,19 +262,7 @@ mod tests {
         for case in 0..6 {
             let resolution = [0.1, 0.05, 0.25][case % 3];
             let origin = Point3::new(rng.next() * 10.0 - 5.0, rng.next() * 10.0 - 5.0, rng.next() - 0.5);
-            let mut cells = Vec::new();
-            for _ in 0..12 {
-                // A square column of cells from the floor up.
-                let (x, y) = ((rng.next() * 300.0) as i64 - 150, (rng.next() * 300.0) as i64 - 150);
-                let (side, top) = ((rng.next() * 12.0) as i64 + 1, (rng.next() * 60.0) as i64 + 1);
-                for i in 0..side {
-                    for j in 0..side {
-                        for k in 0..top {
-                            cells.push([x + i, y + j, k]);
-                        }
-                    }
-                }
-            }
+            let mut cells = columns(&mut rng, 12, 150, 12, 60);
             if case % 2 == 0 {
                 for i in -150..150 {
                     for j in -150..150 {
@@ -313,18 +318,7 @@ mod tests {
     /// hits and the short segments.
     fn contact_disagreements(lose_bits: bool) -> (usize, usize, usize) {
         let mut rng = Lcg(11);
-        let mut cells = Vec::new();
-        for _ in 0..20 {
-            let (x, y) = ((rng.next() * 200.0) as i64 - 100, (rng.next() * 200.0) as i64 - 100);
-            let (side, top) = ((rng.next() * 10.0) as i64 + 1, (rng.next() * 40.0) as i64 + 1);
-            for i in 0..side {
-                for j in 0..side {
-                    for k in 0..top {
-                        cells.push([x + i, y + j, k]);
-                    }
-                }
-            }
-        }
+        let mut cells = columns(&mut rng, 20, 100, 10, 40);
         cells.extend((-100..100).flat_map(|i| (-100..100).map(move |j| [i, j, -1])).filter(|c| (c[0] * c[1]) % 7 != 0));
         let grid = VoxelGrid::new(0.125, Point3::new(-1.0, 2.0, 0.0), cells).unwrap();
         let marker = Point3::new(-1.0, 2.0, 0.3);
