@@ -116,17 +116,10 @@ impl Clearance {
     /// every cell of `cells` (closed cubes): then no walk over that part touches one.
     #[inline]
     pub(super) fn clears(&self, seg: &Segment, ta: f64, tb: f64, cells: &CellBox) -> bool {
-        self.clears_region(seg, ta, tb, &self.region(cells))
+        self.clears_region(seg, ta, tb, &Region::of(self.resolution, &self.origin, cells))
     }
 
-    /// The cells of `cells` in metres, grown by the margin: what [`Clearance::clears`]
-    /// tests a segment against.
-    #[inline]
-    pub(super) fn region(&self, cells: &CellBox) -> Region {
-        Region::of(self.resolution, &self.origin, cells)
-    }
-
-    /// [`Clearance::clears`] against a box already in metres ([`Clearance::region`]).
+    /// [`Clearance::clears`] against a box already in metres ([`Region::of`]).
     #[inline]
     pub(super) fn clears_region(&self, seg: &Segment, ta: f64, tb: f64, region: &Region) -> bool {
         // Every comparison below is one that NaN fails, so NaN never clears.
@@ -155,7 +148,7 @@ impl Clearance {
     }
 }
 
-/// A box of cells in metres, grown by the clearance margin ([`Clearance::region`]).
+/// A box of cells in metres, grown by the clearance margin ([`Region::of`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(super) struct Region {
     pub(super) lo: [f64; 3],
