@@ -7,26 +7,30 @@
 //! C++ compiler; `scripts/test` installs `liboctomap-dev` on a fresh machine.
 
 use dyfos_shared::world::octomap::Octomap;
-use dyfos_tests::data;
+use dyfos_tests::{Scratch, data};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::OnceLock;
 
-/// The oracle, compiled once per run beside the test executable: a directory this
-/// machine certainly lets us execute from (a target's `tmp` need not be), under a
-/// temporary name renamed into place so no one runs a half-written file.
-fn oracle() -> &'static Path {
-    static BUILT: OnceLock<PathBuf> = OnceLock::new();
-    BUILT.get_or_init(|| {
-        let exe = std::env::current_exe().expect("the test executable's path");
-        let dir = exe.parent().expect("the test executable's directory");
-        let out = dir.join("octomap_cells");
-        let partial = dir.join(format!("octomap_cells.{}.partial", std::process::id()));
+/// The oracle, compiled for one test into a scratch directory under the system's
+/// temporary directory, where the C/C++ tests' programs are compiled and run too: CI
+/// could not execute it from the target directory (permission denied, the file's mode
+/// 0600 as the linker left it there), nor from the target's `tmp`.
+struct Oracle {
+    dir: Scratch,
+    exe: PathBuf,
+}
+
+impl Oracle {
+    /// Compiles it into a scratch directory named after the test (`test`).
+    fn build(test: &str) -> Oracle {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = Scratch::new(&format!("octomap-{test}"));
+        let exe = dir.0.join("octomap_cells");
         let source = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("oracle/octomap_cells.cpp");
         let built = Command::new("c++")
             .arg("-O1")
             .arg("-o")
-            .arg(&partial)
+            .arg(&exe)
             .arg(&source)
             .args(["-loctomap", "-loctomath"])
             .output()
@@ -36,38 +40,39 @@ fn oracle() -> &'static Path {
             "cannot build the liboctomap oracle (install liboctomap-dev; scripts/test does): {}",
             String::from_utf8_lossy(&built.stderr)
         );
-        std::fs::rename(&partial, &out).expect("move the oracle into place");
-        out
-    })
-}
+        // Executable whatever mode the linker's file was given.
+        std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).expect("make the oracle executable");
+        Oracle { dir, exe }
+    }
 
-/// Runs the oracle; a failure to start it names the file and its mode.
-fn run_oracle(cmd: &mut Command) -> std::process::Output {
-    cmd.output().unwrap_or_else(|e| {
-        use std::os::unix::fs::PermissionsExt;
-        let mode = std::fs::metadata(oracle()).map(|m| format!("{:o}", m.permissions().mode()));
-        panic!("cannot run the oracle {} (mode {mode:?}): {e}", oracle().display())
-    })
-}
-
-/// What liboctomap reads from `file`: occupied nodes (min index, side), sorted; node
-/// count; resolution.
-fn liboctomap(file: &Path) -> (Vec<[i64; 4]>, u64, f64) {
-    let listed = run_oracle(Command::new(oracle()).arg(file));
-    assert!(listed.status.success(), "{}", String::from_utf8_lossy(&listed.stderr));
-    let text = String::from_utf8(listed.stdout).unwrap();
-    let (cubes, last) = text.trim_end().rsplit_once('\n').unwrap_or(("", text.trim_end()));
-    let mut nodes: Vec<[i64; 4]> = cubes
-        .lines()
-        .map(|l| {
-            let v: Vec<i64> = l.split(' ').map(|n| n.parse().unwrap()).collect();
-            [v[0], v[1], v[2], v[3]]
+    /// Runs the oracle with `args`; a failure to start it names the file and its mode.
+    fn run(&self, args: &[&std::ffi::OsStr]) -> std::process::Output {
+        Command::new(&self.exe).args(args).output().unwrap_or_else(|e| {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(&self.exe).map(|m| format!("{:o}", m.permissions().mode()));
+            panic!("cannot run the oracle {} (mode {mode:?}): {e}", self.exe.display())
         })
-        .collect();
-    nodes.sort_unstable();
-    let fields: Vec<&str> = last.split(' ').collect();
-    assert_eq!((fields[0], fields[2]), ("nodes", "res"), "{last}");
-    (nodes, fields[1].parse().unwrap(), fields[3].parse().unwrap())
+    }
+
+    /// What liboctomap reads from `file`: occupied nodes (min index, side), sorted;
+    /// node count; resolution.
+    fn read(&self, file: &Path) -> (Vec<[i64; 4]>, u64, f64) {
+        let listed = self.run(&[file.as_os_str()]);
+        assert!(listed.status.success(), "{}", String::from_utf8_lossy(&listed.stderr));
+        let text = String::from_utf8(listed.stdout).unwrap();
+        let (cubes, last) = text.trim_end().rsplit_once('\n').unwrap_or(("", text.trim_end()));
+        let mut nodes: Vec<[i64; 4]> = cubes
+            .lines()
+            .map(|l| {
+                let v: Vec<i64> = l.split(' ').map(|n| n.parse().unwrap()).collect();
+                [v[0], v[1], v[2], v[3]]
+            })
+            .collect();
+        nodes.sort_unstable();
+        let fields: Vec<&str> = last.split(' ').collect();
+        assert_eq!((fields[0], fields[2]), ("nodes", "res"), "{last}");
+        (nodes, fields[1].parse().unwrap(), fields[3].parse().unwrap())
+    }
 }
 
 /// What our reader reads, in the same form.
@@ -81,7 +86,7 @@ fn ours(file: &Path) -> (Vec<[i64; 4]>, u64, f64) {
 #[test]
 fn the_reader_finds_the_occupied_nodes_liboctomap_finds() {
     let file = data("octomap/geb079.bt");
-    let (expected, got) = (liboctomap(&file), ours(&file));
+    let (expected, got) = (Oracle::build("geb079").read(&file), ours(&file));
     assert_eq!(got.0.len(), expected.0.len());
     assert_eq!(got.0, expected.0, "the occupied nodes differ");
     assert_eq!((got.1, got.2.to_bits()), (expected.1, expected.2.to_bits()));
@@ -92,16 +97,15 @@ fn the_reader_finds_the_occupied_nodes_liboctomap_finds() {
 
 #[test]
 fn maps_liboctomap_writes_pruned_or_not_read_the_same() {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("octomap-generated");
-    std::fs::create_dir_all(&dir).unwrap();
+    let oracle = Oracle::build("pruned-or-not");
     let mut pruned_nodes = 0;
     for (res, seed) in [("0.05", "1"), ("0.1", "2"), ("0.37", "3")] {
         let mut cells_by_form = Vec::new();
         for form in ["pruned", "unpruned"] {
-            let file = dir.join(format!("map-{res}-{seed}-{form}.bt"));
-            let made = run_oracle(Command::new(oracle()).args(["generate"]).arg(&file).args([res, seed, form]));
+            let file = oracle.dir.0.join(format!("map-{res}-{seed}-{form}.bt"));
+            let made = oracle.run(&["generate".as_ref(), file.as_os_str(), res.as_ref(), seed.as_ref(), form.as_ref()]);
             assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
-            let (expected, got) = (liboctomap(&file), ours(&file));
+            let (expected, got) = (oracle.read(&file), ours(&file));
             assert_eq!(got.0, expected.0, "{res} {form}: the occupied nodes differ");
             assert_eq!((got.1, got.2.to_bits()), (expected.1, expected.2.to_bits()), "{res} {form}");
             pruned_nodes += got.0.iter().filter(|c| c[3] > 1).count();
@@ -127,10 +131,11 @@ fn liboctomap_reads_the_files_dyfos_writes() {
     let original = Octomap::from_bt(&std::fs::read(data("octomap/geb079.bt")).unwrap()).unwrap();
     let mut cells: Vec<[i64; 3]> = original.occupied().iter().flat_map(|c| c.cells().collect::<Vec<_>>()).collect();
     cells.sort_unstable();
-    let file = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("written-by-dyfos.bt");
+    let oracle = Oracle::build("written-by-dyfos");
+    let file = oracle.dir.0.join("written-by-dyfos.bt");
     let bytes = dyfos_shared::world::octomap::write_bt(original.resolution(), cells.iter().copied()).unwrap();
     std::fs::write(&file, bytes).unwrap();
-    let (nodes, _, res) = liboctomap(&file);
+    let (nodes, _, res) = oracle.read(&file);
     let mut back: Vec<[i64; 3]> = nodes
         .iter()
         .flat_map(|c| {
