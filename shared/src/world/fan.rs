@@ -331,7 +331,7 @@ impl World {
         hi: &Point3<f64>,
     ) -> bool {
         match self.leaves[leaf as usize] {
-            Leaf::Voxels => !self.voxels_may_touch_near(&fan.bricks, lo, hi),
+            Leaf::Voxels => !self.voxel_bricks_may_touch(&fan.bricks, lo, hi),
             Leaf::Solid { shape: super::Obstacle::Cylinder(c), .. } => fan.misses_cylinder(sensor, &c),
             Leaf::Solid { shape: super::Obstacle::Box(b), .. } => fan.misses_box(sensor, &b),
         }

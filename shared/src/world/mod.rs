@@ -353,6 +353,13 @@ impl World {
         self.voxels.as_ref().is_some_and(|v| v.may_touch_box_near(near, lo, hi))
     }
 
+    /// [`World::voxels_may_touch_near`] by the bricks' bits alone
+    /// ([`VoxelGrid::bricks_may_touch_box`]).
+    #[inline(never)]
+    fn voxel_bricks_may_touch(&self, near: &NearBricks, lo: &Point3<f64>, hi: &Point3<f64>) -> bool {
+        self.voxels.as_ref().is_some_and(|v| v.bricks_may_touch_box(near, lo, hi))
+    }
+
     /// Whether any of `segments` touches leaf `leaf` up to its own end.
     #[inline]
     fn leaf_touches(&self, leaf: u32, segments: &[Segment]) -> bool {
