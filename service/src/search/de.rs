@@ -54,6 +54,7 @@ use super::stall::{Stall, StallWatch};
 use super::{Evaluator, Search, SearchControl, SearchOutcome};
 use crate::lupp::Lupp;
 use dyfos_shared::answer::StopReason;
+use dyfos_shared::math::rem_euclid;
 use dyfos_shared::sensor::SearchSpace;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -353,7 +354,7 @@ fn mirror_image(x: Member) -> Member {
 
 /// The pose turned about the rover by `turn` of a full turn: viewer yaw + 2π·turn.
 fn turned([rho, psi, phi, yaw]: Member, turn: f64) -> Member {
-    [rho, psi, phi, (yaw + turn).rem_euclid(1.0)]
+    [rho, psi, phi, rem_euclid(yaw + turn, 1.0)]
 }
 
 /// Moves `x` by `step` along `dir` in the unit cube: yaw wraps, the rest clamps.
@@ -362,7 +363,7 @@ fn moved(x: &Member, dir: &Member, step: f64) -> Member {
     for j in 0..DIMS {
         if dir[j] != 0.0 {
             y[j] += dir[j] * step;
-            y[j] = if j == DIMS - 1 { y[j].rem_euclid(1.0) } else { y[j].clamp(0.0, 1.0) };
+            y[j] = if j == DIMS - 1 { rem_euclid(y[j], 1.0) } else { y[j].clamp(0.0, 1.0) };
         }
     }
     y
