@@ -16,6 +16,7 @@ use super::tree::NODE_SHIFT;
 use super::{NearBricks, VoxelGrid};
 use crate::math::floor;
 use crate::world::segment::Segment;
+use arrayvec::ArrayVec;
 
 /// Most nodes a batch's box may meet for their covers to be gathered.
 const BATCH_NODES: i64 = 16;
@@ -28,7 +29,7 @@ impl VoxelGrid {
     /// segments of a query whose bricks near them are `near`: the verdict of
     /// [`VoxelGrid::first_contact_near`] on each of them, the same answer.
     pub fn any_contact_near(&self, segments: &[Segment], near: &NearBricks) -> bool {
-        let mut regions = [Region::default(); BATCH_BOXES];
+        let mut regions = ArrayVec::new();
         let gathered = self.covers_near(segments, &mut regions).map(|n| &regions[..n]);
         self.any_contact_among(segments, near, gathered)
     }
@@ -58,12 +59,11 @@ impl VoxelGrid {
     /// The boxes of the covers of the nodes near `segments` that meet the cells
     /// within a cell of the segments' box; `None` when the box is not finite, or
     /// the nodes or boxes are too many (then each segment gets the exact test).
-    /// Written to `regions`; how many.
-    fn covers_near(&self, segments: &[Segment], regions: &mut [Region; BATCH_BOXES]) -> Option<usize> {
+    /// Pushed onto `regions` (empty); how many.
+    fn covers_near(&self, segments: &[Segment], regions: &mut ArrayVec<Region, BATCH_BOXES>) -> Option<usize> {
         let (cells_lo, cells_end) = self.tree.bounds()?;
         let (lo, hi) = crate::world::span(segments)?;
         let inv_resolution = 1.0 / self.resolution;
-        let mut len = 0;
         let (mut first, mut last) = ([0i64; 3], [0i64; 3]);
         for a in 0..3 {
             // The cells near the box, one more on each side for rounding.
@@ -91,16 +91,12 @@ impl VoxelGrid {
                         if (0..3).any(|a| b.hi[a] < first[a] || b.lo[a] > last[a]) {
                             continue;
                         }
-                        if len == BATCH_BOXES {
-                            return None;
-                        }
-                        regions[len] = Region::of(self.resolution, &self.origin, &b);
-                        len += 1;
+                        regions.try_push(Region::of(self.resolution, &self.origin, &b)).ok()?;
                     }
                 }
             }
         }
-        Some(len)
+        Some(regions.len())
     }
 }
 
@@ -181,7 +177,7 @@ mod tests {
                         batch.push(Segment::closed(c, d.normalize(), 3.0 * r));
                     }
                 }
-                let mut regions = [Region::default(); BATCH_BOXES];
+                let mut regions = ArrayVec::new();
                 let Some(n) = grid.covers_near(&batch, &mut regions) else { continue };
                 // Leave out the boxes nearest the floor first.
                 let mut kept: Vec<Region> = regions[..n].to_vec();
