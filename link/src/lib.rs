@@ -59,6 +59,8 @@
 
 pub mod evaluations;
 pub mod health;
+mod watcher;
+mod within;
 
 use dyfos_mission::mission::topics::{MAX_BUFFER, Outbox, TopicOpenError, TopicSendError, Topics, TopicsConfig};
 use dyfos_shared::wire::mission::{
@@ -76,6 +78,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
+use within::Outcome;
 use zenoh::Wait;
 
 /// Version of the link's frames; a frame of another version is dropped.
@@ -733,16 +736,11 @@ impl Link {
     /// Keeps [`Link::connected`] current from a thread of its own: asking Zenoh
     /// for its peers blocks while its routing is stalled.
     fn watch_peers(&mut self) -> Result<(), LinkStartError> {
-        let (session, stop, peers) = (self.session.clone(), self.stop.clone(), self.peers.clone());
-        let thread = std::thread::Builder::new()
-            .name("link-peers".into())
-            .spawn(move || {
-                while !stop.load(Ordering::Relaxed) {
-                    peers.store(session.info().peers_zid().wait().next().is_some(), Ordering::Relaxed);
-                    std::thread::sleep(NAP);
-                }
-            })
-            .map_err(|e| LinkStartError::Zenoh(format!("cannot start a thread: {e}")))?;
+        let session = self.session.clone();
+        let thread = watcher::watch("link-peers", self.peers.clone(), self.stop.clone(), NAP, move || {
+            session.info().peers_zid().wait().next().is_some()
+        })
+        .map_err(|e| LinkStartError::Zenoh(format!("cannot start a thread: {e}")))?;
         self.threads.push(thread);
         Ok(())
     }
@@ -762,19 +760,17 @@ impl Link {
         // The announcement's undeclaring and the close wait on Zenoh: on a thread
         // of their own, so that a stalled Zenoh cannot keep the process from exiting.
         let (session, hello) = (self.session.clone(), self.hello.take());
-        let (done, closed) = std::sync::mpsc::channel();
-        let closer = std::thread::Builder::new().name("link-close".into()).spawn(move || {
+        let closed = within::run_within("link-close", CLOSE_GRACE, move || {
             drop(hello);
-            let _ = done.send(session.close().wait());
+            session.close().wait()
         });
-        let outcome = match closer {
-            Ok(_) => closed.recv_timeout(CLOSE_GRACE).ok(),
-            Err(_) => Some(self.session.close().wait()),
-        };
-        match outcome {
-            Some(Ok(())) => {}
-            Some(Err(e)) => tracing::warn!("stopping: the Zenoh session did not close cleanly: {e}"),
-            None => tracing::warn!("stopping: the Zenoh session did not close within {CLOSE_GRACE:?}; left behind"),
+        match closed {
+            Outcome::Finished(Ok(())) => {}
+            Outcome::Finished(Err(e)) => tracing::warn!("stopping: the Zenoh session did not close cleanly: {e}"),
+            Outcome::Panicked(why) => tracing::warn!("stopping: closing the Zenoh session panicked: {why}"),
+            Outcome::LeftBehind => {
+                tracing::warn!("stopping: the Zenoh session did not close within {CLOSE_GRACE:?}; left behind")
+            }
         }
     }
 }
