@@ -251,6 +251,7 @@ impl World {
     /// [`World::star_contact_near`] given `turn`, `star.yaw.sin_cos()`: the
     /// horizontal segments' directions decide more leaves without the exact test
     /// ([`Star::touches_cylinder_beside`], [`Star::touches_box_turned`]).
+    #[inline]
     pub fn star_contact_near_turned(&self, near: &Nearby, star: &Star, turn: (f64, f64)) -> bool {
         let (lo, hi) = star.bounds();
         self.contact_near(
