@@ -197,15 +197,22 @@ pub fn rows3(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
 
 #[cfg(test)]
 mod tests {
+    /// `count` pseudo-random words (xorshift64 from `seed`).
+    fn words(seed: u64, count: usize) -> impl Iterator<Item = u64> {
+        let mut x = seed;
+        (0..count).map(move |_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        })
+    }
+
     #[test]
     fn floor_is_f64_floor() {
         let mut values = vec![0.0, -0.0, 0.3, -0.3, 1.0, -1.0, 2.5, -2.5, 1e-300, -1e-300, f64::NAN, f64::INFINITY];
         values.extend([f64::NEG_INFINITY, 4_503_599_627_370_495.5, -4_503_599_627_370_495.5, 9.3e18, -9.3e18, 1e300]);
-        let mut x = 0x9E37_79B9_7F4A_7C15u64;
-        for _ in 0..100_000 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
+        for x in words(0x9E37_79B9_7F4A_7C15, 100_000) {
             values.push(f64::from_bits(x));
             values.push((x as i64 >> 20) as f64 / 1024.0);
         }
@@ -230,11 +237,7 @@ mod tests {
                 }
             }
         }
-        let mut x = 0x2545_F491_4F6C_DD1Du64;
-        for _ in 0..100_000 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
+        for x in words(0x2545_F491_4F6C_DD1D, 100_000) {
             values.push(f64::from_bits(x));
             values.push((x as i64 >> 10) as f64 / (1u64 << 51) as f64);
         }
