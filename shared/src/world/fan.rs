@@ -249,7 +249,7 @@ impl World {
             if self.sight_rules_out(fan, sensor, e.leaf, lo, hi) {
                 continue;
             }
-            if self.leaf_touches_near(e.leaf, segments, &fan.bricks) {
+            if self.leaf_touches_near(e.leaf, segments, &fan.bricks, lo, hi) {
                 return true;
             }
         }
@@ -357,7 +357,7 @@ impl World {
         let Some((first, rest)) = entries.split_first() else {
             return false;
         };
-        if self.leaf_touches_near(first.leaf, &batch[..n], &fan.bricks) {
+        if self.leaf_touches_near(first.leaf, &batch[..n], &fan.bricks, lo, hi) {
             return true;
         }
         for e in rest {
@@ -369,7 +369,7 @@ impl World {
             }
             let touches = match self.sight_decided(e.leaf, sensor, targets, margin, lo, hi) {
                 Some(decided) => decided,
-                None => self.leaf_touches_near(e.leaf, &batch[..n], &fan.bricks),
+                None => self.leaf_touches_near(e.leaf, &batch[..n], &fan.bricks, lo, hi),
             };
             if touches {
                 return true;

@@ -367,11 +367,18 @@ impl World {
     }
 
     /// [`World::leaf_touches`] for segments of a query whose voxel bricks near them
-    /// are `near`: the same answer.
+    /// are `near`, all inside the closed box `[lo, hi]`: the same answer.
     #[inline]
-    fn leaf_touches_near(&self, leaf: u32, segments: &[Segment], near: &NearBricks) -> bool {
+    fn leaf_touches_near(
+        &self,
+        leaf: u32,
+        segments: &[Segment],
+        near: &NearBricks,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+    ) -> bool {
         match (&self.leaves[leaf as usize], &self.voxels) {
-            (Leaf::Voxels, Some(v)) => v.any_contact_near(segments, near),
+            (Leaf::Voxels, Some(v)) => v.any_contact_near(segments, near, lo, hi),
             _ => self.leaf_touches(leaf, segments),
         }
     }

@@ -162,7 +162,7 @@ impl World {
                 None => {}
             }
             let batch = made.get_or_insert_with(|| (segments.take().expect("made once"))());
-            if self.leaf_touches_near(*leaf_id, batch.as_ref(), &near.bricks) {
+            if self.leaf_touches_near(*leaf_id, batch.as_ref(), &near.bricks, lo, hi) {
                 return true;
             }
         }

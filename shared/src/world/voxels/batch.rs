@@ -14,7 +14,7 @@
 use super::bounds::{Clearance, Region};
 use super::tree::NODE_SHIFT;
 use super::{NearBricks, VoxelGrid};
-use crate::math::floor;
+use crate::math::{Point3, floor};
 use crate::world::segment::Segment;
 use arrayvec::ArrayVec;
 
@@ -26,11 +26,18 @@ const BATCH_BOXES: usize = 40;
 
 impl VoxelGrid {
     /// Whether any of `segments` touches an occupied cell up to its own end, for
-    /// segments of a query whose bricks near them are `near`: the verdict of
-    /// [`VoxelGrid::first_contact_near`] on each of them, the same answer.
-    pub fn any_contact_near(&self, segments: &[Segment], near: &NearBricks) -> bool {
+    /// segments of a query whose bricks near them are `near`, all inside the closed
+    /// box `[lo, hi]` (the caller's box of them: a star's, the sight lines'): the
+    /// verdict of [`VoxelGrid::first_contact_near`] on each of them, the same answer.
+    pub fn any_contact_near(
+        &self,
+        segments: &[Segment],
+        near: &NearBricks,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+    ) -> bool {
         let mut regions = ArrayVec::new();
-        let gathered = self.covers_near(segments, &mut regions).map(|n| &regions[..n]);
+        let gathered = self.covers_near(lo, hi, &mut regions).map(|n| &regions[..n]);
         self.any_contact_among(segments, near, gathered)
     }
 
@@ -56,13 +63,17 @@ impl VoxelGrid {
         clearance.enabled() && regions.iter().all(|r| clearance.clears_region(seg, t0, t1, r))
     }
 
-    /// The boxes of the covers of the nodes near `segments` that meet the cells
-    /// within a cell of the segments' box; `None` when the box is not finite, or
-    /// the nodes or boxes are too many (then each segment gets the exact test).
-    /// Pushed onto `regions` (empty); how many.
-    fn covers_near(&self, segments: &[Segment], regions: &mut ArrayVec<Region, BATCH_BOXES>) -> Option<usize> {
+    /// The boxes of the covers of the nodes near the closed box `[lo, hi]` (holding
+    /// a batch's segments) that meet the cells within a cell of it; `None` when the
+    /// box is not finite, or the nodes or boxes are too many (then each segment gets
+    /// the exact test). Pushed onto `regions` (empty); how many.
+    fn covers_near(
+        &self,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+        regions: &mut ArrayVec<Region, BATCH_BOXES>,
+    ) -> Option<usize> {
         let (cells_lo, cells_end) = self.tree.bounds()?;
-        let (lo, hi) = crate::world::span(segments)?;
         let inv_resolution = 1.0 / self.resolution;
         let (mut first, mut last) = ([0i64; 3], [0i64; 3]);
         for a in 0..3 {
@@ -178,7 +189,8 @@ mod tests {
                     }
                 }
                 let mut regions = ArrayVec::new();
-                let Some(n) = grid.covers_near(&batch, &mut regions) else { continue };
+                let (lo, hi) = crate::world::span(&batch).unwrap();
+                let Some(n) = grid.covers_near(&lo, &hi, &mut regions) else { continue };
                 // Leave out the boxes nearest the floor first.
                 let mut kept: Vec<Region> = regions[..n].to_vec();
                 kept.sort_by(|a, b| a.lo[2].total_cmp(&b.lo[2]));
@@ -194,7 +206,7 @@ mod tests {
                 }
                 wrong_batches += usize::from(grid.any_contact_among(&batch, &near, Some(kept)) != touched);
                 if lose == 0 {
-                    assert_eq!(grid.any_contact_near(&batch, &near), touched);
+                    assert_eq!(grid.any_contact_near(&batch, &near, &lo, &hi), touched);
                 }
             }
         }
