@@ -36,6 +36,15 @@ impl VoxelGrid {
         lo: &Point3<f64>,
         hi: &Point3<f64>,
     ) -> bool {
+        // The gathering's cell of slack absorbs rounding; a box missing more of a
+        // segment would leave cells near it out and clear it wrongly.
+        debug_assert!(
+            crate::world::span(segments).is_none_or(|(l, h)| (0..3).all(|a| {
+                let r = self.resolution;
+                (l[a] >= lo[a] - r && h[a] <= hi[a] + r) || [l[a], h[a], lo[a], hi[a]].iter().any(|v| v.is_nan())
+            })),
+            "the batch's box {lo:?}..{hi:?} does not hold its segments"
+        );
         let mut regions = ArrayVec::new();
         let gathered = self.covers_near(lo, hi, &mut regions).map(|n| &regions[..n]);
         self.any_contact_among(segments, near, gathered)
