@@ -36,11 +36,11 @@ impl VoxelGrid {
         lo: &Point3<f64>,
         hi: &Point3<f64>,
     ) -> bool {
-        // The gathering's cell of slack absorbs rounding; a box missing more of a
-        // segment would leave cells near it out and clear it wrongly.
+        // A box missing part of a segment would leave cells near it out and clear it
+        // wrongly; the gathering's cell of slack is for the rounding of end points.
         debug_assert!(
             crate::world::span(segments).is_none_or(|(l, h)| (0..3).all(|a| {
-                let r = self.resolution;
+                let r = 1e-6 * self.resolution;
                 (l[a] >= lo[a] - r && h[a] <= hi[a] + r) || [l[a], h[a], lo[a], hi[a]].iter().any(|v| v.is_nan())
             })),
             "the batch's box {lo:?}..{hi:?} does not hold its segments"
