@@ -58,11 +58,7 @@ fn caught<T>(job: impl FnOnce() -> T) -> Outcome<T> {
     match std::panic::catch_unwind(AssertUnwindSafe(job)) {
         Ok(value) => Outcome::Finished(value),
         Err(payload) => Outcome::Panicked(
-            payload
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| payload.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "a panic without a message".into()),
+            dyfos_process::panic::panic_text(payload.as_ref()).unwrap_or("a panic without a message").to_string(),
         ),
     }
 }

@@ -11,6 +11,7 @@
 //! - [`abandoned`]: iceoryx2 services whose creator died creating them, removed;
 //! - [`child`]: a child process killed when its owner lets go of it;
 //! - [`netns`]: network namespaces standing for hosts on one machine (Linux);
+//! - [`panic`]: what a caught panic said (the C boundary, the link's stop);
 //! - [`scratch`]: a test's scratch directory, removed when dropped;
 //! - [`logging`] (feature `logging`): the log on stderr, with its flood limit;
 //! - [`cli`] (feature `cli`): the conventions every dyfos command line keeps.
@@ -33,5 +34,6 @@ pub mod idle;
 pub mod logging;
 #[cfg(target_os = "linux")]
 pub mod netns;
+pub mod panic;
 pub mod scratch;
 pub mod shutdown;

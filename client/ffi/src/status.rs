@@ -200,17 +200,6 @@ pub(crate) fn with_last_error<T>(f: impl FnOnce(&str) -> T) -> Option<T> {
     LAST_ERROR.try_with(|m| m.try_borrow().ok().map(|m| f(&m))).ok().flatten()
 }
 
-/// The text of a panic's payload.
-fn panic_text(payload: &(dyn std::any::Any + Send)) -> &str {
-    if let Some(s) = payload.downcast_ref::<&str>() {
-        s
-    } else if let Some(s) = payload.downcast_ref::<String>() {
-        s
-    } else {
-        "no message"
-    }
-}
-
 /// The panic boundary: runs `body`, records its error message for
 /// `dyfos_last_error` and returns its code; a panic is caught and becomes
 /// `DYFOS_STATUS_PANIC` (it never unwinds into C).
@@ -227,7 +216,7 @@ pub(crate) fn boundary(body: impl FnOnce() -> Result<(), Failure>) -> dyfos_stat
         Err(payload) => {
             let text = format!(
                 "bug in libdyfos, caught at the C boundary: {}; the call did nothing more, please report it",
-                panic_text(payload.as_ref())
+                dyfos_process::panic::panic_text(payload.as_ref()).unwrap_or("no message")
             );
             // Dropping a payload can itself panic; never let that unwind into C.
             let _ = catch_unwind(AssertUnwindSafe(move || drop(payload)));
