@@ -46,7 +46,7 @@ impl VoxelGrid {
             "the batch's box {lo:?}..{hi:?} does not hold its segments"
         );
         let mut regions = ArrayVec::new();
-        let gathered = self.covers_near(lo, hi, &mut regions).map(|n| &regions[..n]);
+        let gathered = self.covers_near(lo, hi, &mut regions);
         self.any_contact_among(segments, near, gathered)
     }
 
@@ -75,13 +75,13 @@ impl VoxelGrid {
     /// The boxes of the covers of the nodes near the closed box `[lo, hi]` (holding
     /// a batch's segments) that meet the cells within a cell of it; `None` when the
     /// box is not finite, or the nodes or boxes are too many (then each segment gets
-    /// the exact test). Pushed onto `regions` (empty); how many.
-    fn covers_near(
+    /// the exact test). Pushed onto `regions` (empty), and given back as a slice.
+    fn covers_near<'a>(
         &self,
         lo: &Point3<f64>,
         hi: &Point3<f64>,
-        regions: &mut ArrayVec<Region, BATCH_BOXES>,
-    ) -> Option<usize> {
+        regions: &'a mut ArrayVec<Region, BATCH_BOXES>,
+    ) -> Option<&'a [Region]> {
         let (cells_lo, cells_end) = self.tree.bounds()?;
         let inv_resolution = 1.0 / self.resolution;
         let (mut first, mut last) = ([0i64; 3], [0i64; 3]);
@@ -94,7 +94,7 @@ impl VoxelGrid {
             }
             (first[a], last[a]) = (l.max((cells_lo[a] - 1) as f64) as i64, h.min(cells_end[a] as f64) as i64);
             if first[a] > last[a] {
-                return Some(0);
+                return Some(regions.as_slice());
             }
         }
         let nodes = (0..3).map(|a| (last[a] >> NODE_SHIFT) - (first[a] >> NODE_SHIFT) + 1).product::<i64>();
@@ -116,7 +116,7 @@ impl VoxelGrid {
                 }
             }
         }
-        Some(regions.len())
+        Some(regions.as_slice())
     }
 }
 
@@ -199,9 +199,9 @@ mod tests {
                 }
                 let mut regions = ArrayVec::new();
                 let (lo, hi) = crate::world::span(&batch).unwrap();
-                let Some(n) = grid.covers_near(&lo, &hi, &mut regions) else { continue };
+                let Some(gathered) = grid.covers_near(&lo, &hi, &mut regions) else { continue };
                 // Leave out the boxes nearest the floor first.
-                let mut kept: Vec<Region> = regions[..n].to_vec();
+                let mut kept: Vec<Region> = gathered.to_vec();
                 kept.sort_by(|a, b| a.lo[2].total_cmp(&b.lo[2]));
                 let kept = &kept[lose.min(kept.len())..];
                 let mut touched = false;

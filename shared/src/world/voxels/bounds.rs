@@ -149,7 +149,7 @@ impl Clearance {
 }
 
 /// A box of cells in metres, grown by the clearance margin ([`Region::of`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Region {
     pub(super) lo: [f64; 3],
     pub(super) hi: [f64; 3],
