@@ -59,7 +59,10 @@ impl VoxelGrid {
             {
                 return false;
             }
-            self.first_contact_near(s, near).is_some_and(|t| s.reaches(t))
+            // A segment that did not clear the gathered boxes does not clear the
+            // covers of the nodes around it either (the same boxes): straight to
+            // the walk.
+            self.first_contact_with(s, true, Some(near), gathered.is_none()).is_some_and(|t| s.reaches(t))
         })
     }
 

@@ -186,15 +186,17 @@ mod tests {
     }
 
     /// Asserts that `seg`'s first contact is the same, bit for bit, with and without
-    /// the boxes; whether it hits.
+    /// the boxes, and without the nodes' covers tried first; whether it hits.
     fn same_with_and_without_boxes(grid: &VoxelGrid, seg: &Segment) -> bool {
-        let with = grid.first_contact_with(seg, true, None);
-        let without = grid.first_contact_with(seg, false, None);
+        let with = grid.first_contact_with(seg, true, None, true);
+        let without = grid.first_contact_with(seg, false, None, true);
+        let walked = grid.first_contact_with(seg, true, None, false);
         assert_eq!(
             with.map(f64::to_bits),
             without.map(f64::to_bits),
             "{seg:?}: with boxes {with:?}, without {without:?}"
         );
+        assert_eq!(with.map(f64::to_bits), walked.map(f64::to_bits), "{seg:?}: without the nodes' covers {walked:?}");
         without.is_some()
     }
 

@@ -387,19 +387,27 @@ impl VoxelGrid {
     /// The smallest `t ∈ [0, seg.length]` at which the segment touches an occupied
     /// closed cell, or `None`. The segment's `end` is not applied. Allocates nothing.
     pub fn first_contact(&self, seg: &Segment) -> Option<f64> {
-        self.first_contact_with(seg, true, None)
+        self.first_contact_with(seg, true, None, true)
     }
 
     /// [`VoxelGrid::first_contact`], the same answer bit for bit, for a segment of
     /// a query whose bricks near it are `near`: a short segment among empty bricks
     /// is settled by their bits.
     pub fn first_contact_near(&self, seg: &Segment, near: &NearBricks) -> Option<f64> {
-        self.first_contact_with(seg, true, Some(near))
+        self.first_contact_with(seg, true, Some(near), true)
     }
 
     /// [`VoxelGrid::first_contact`], passing blocks by their cells' boxes or not
-    /// (`boxes`): the same answer, bit for bit, either way.
-    fn first_contact_with(&self, seg: &Segment, boxes: bool, near: Option<&NearBricks>) -> Option<f64> {
+    /// (`boxes`), trying the covers of the nodes around the segment before the
+    /// walk or not (`nodes`; a batch that already tried them skips them): the same
+    /// answer, bit for bit, either way.
+    pub(super) fn first_contact_with(
+        &self,
+        seg: &Segment,
+        boxes: bool,
+        near: Option<&NearBricks>,
+        nodes: bool,
+    ) -> Option<f64> {
         let (lo, end) = self.tree.bounds()?;
         let (box_lo, box_hi) = self.aabb()?;
         let (mut t0, mut t1) = (0.0, seg.length.max(0.0));
@@ -424,7 +432,7 @@ impl VoxelGrid {
         let walk = walk::Walk::new(&self.tree, self.resolution, self.origin, seg, lo, end, boxes);
         // A segment clear of the covers of the few nodes around it (a sight line
         // above a floor) touches nothing: no walk.
-        if walk.clears_nodes(t0, t1) {
+        if nodes && walk.clears_nodes(t0, t1) {
             return None;
         }
         let mut best = f64::INFINITY;
