@@ -4,14 +4,17 @@
 //! On its own, each segment finds the nodes around it and tests it against their
 //! covers' boxes ([`super::walk`]'s `clears_nodes`), turning every box into metres
 //! again; the segments of a batch share those nodes. Here the boxes of the covers
-//! near the batch's box are gathered once, in metres, and a segment that clears
-//! every one of them (by the clearance margin) touches no occupied cell, for the
-//! same reason as there: the boxes hold every occupied cell near it. Only that
-//! verdict is taken from them; any other segment gets the exact test, so the
-//! answer is the exact tests' own. A sight line clear of the floor below it and
-//! of the walls beside it costs a few box tests instead of a look-up of its nodes.
+//! near the batch's box are gathered once (from the query's list of them,
+//! [`super::near_covers`], or else from the tree), and a segment that clears every
+//! one of them (by the clearance margin) touches no occupied cell, for the same
+//! reason as there: the boxes hold every occupied cell near it. No box near the
+//! batch clears every segment at once. Only that verdict is taken from them; any
+//! other segment gets the exact test, so the answer is the exact tests' own. A
+//! sight line clear of the floor below it and of the walls beside it costs a few
+//! box tests instead of a look-up of its nodes.
 
 use super::bounds::{Clearance, Region};
+use super::near_covers::Gathered;
 use super::tree::NODE_SHIFT;
 use super::{NearBricks, VoxelGrid};
 use crate::math::{Point3, floor};
@@ -36,6 +39,21 @@ impl VoxelGrid {
         lo: &Point3<f64>,
         hi: &Point3<f64>,
     ) -> bool {
+        self.any_contact_near_kept(segments, near, lo, hi, |_, _| true)
+    }
+
+    /// [`VoxelGrid::any_contact_near`], leaving out the covers' boxes `[lo, hi]`
+    /// (m) for which `keep` is `false`: it must say so only of a box no segment of
+    /// the batch touches (a sight fan's reasoning about one sensor's lines). The
+    /// same answer.
+    pub(crate) fn any_contact_near_kept(
+        &self,
+        segments: &[Segment],
+        near: &NearBricks,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+        keep: impl Fn(&[f64; 3], &[f64; 3]) -> bool,
+    ) -> bool {
         // A box missing part of a segment would leave cells near it out and clear it
         // wrongly; the gathering's cell of slack is for the rounding of end points.
         debug_assert!(
@@ -46,7 +64,24 @@ impl VoxelGrid {
             "the batch's box {lo:?}..{hi:?} does not hold its segments"
         );
         let mut regions = ArrayVec::new();
-        let gathered = self.covers_near(lo, hi, &mut regions);
+        let gathered = match self.gather_covers(near, lo, hi, BATCH_NODES, &mut regions) {
+            Some(Gathered::All) => {
+                regions.retain(|r| keep(&r.lo, &r.hi));
+                // No box of the query's covers near the batch: no occupied cell is
+                // near a segment (the query's covers exist only where the boxes'
+                // margin is far above the rounding).
+                if regions.is_empty() {
+                    return false;
+                }
+                Some(regions.as_slice())
+            }
+            Some(Gathered::TooMany) => None,
+            None if self.covers_near(lo, hi, &mut regions).is_some() => {
+                regions.retain(|r| keep(&r.lo, &r.hi));
+                Some(regions.as_slice())
+            }
+            None => None,
+        };
         self.any_contact_among(segments, near, gathered)
     }
 
@@ -162,10 +197,12 @@ mod tests {
     /// around a marker, and collision stars: counts the segments the boxes
     /// (`gathered` from the batch's, `lose` of them left out) call clear where
     /// they touch a cell, and the batches whose verdict differs from every
-    /// segment's exact test; and the segments the boxes settled, and the hits.
-    fn disagreements(lose: usize) -> (usize, usize, usize, usize) {
+    /// segment's exact test; and the segments the boxes settled, the hits, and the
+    /// batches that took boxes from the query's covers (each the tree's boxes
+    /// meeting the batch's box, or the test fails).
+    fn disagreements(lose: usize) -> (usize, usize, usize, usize, usize) {
         let mut rng = Lcg(41);
-        let (mut wrong, mut wrong_batches, mut settled, mut hits) = (0, 0, 0, 0);
+        let (mut wrong, mut wrong_batches, mut settled, mut hits, mut from_near) = (0, 0, 0, 0, 0);
         for case in 0..4 {
             // Rooms wider than a node, as in a building at 5 cm.
             let room = [96, 100][case % 2];
@@ -203,6 +240,7 @@ mod tests {
                 let mut regions = ArrayVec::new();
                 let (lo, hi) = crate::world::span(&batch).unwrap();
                 let Some(gathered) = grid.covers_near(&lo, &hi, &mut regions) else { continue };
+                let gathered: &[Region] = gathered;
                 // Leave out the boxes nearest the floor first.
                 let mut kept: Vec<Region> = gathered.to_vec();
                 kept.sort_by(|a, b| a.lo[2].total_cmp(&b.lo[2]));
@@ -219,26 +257,41 @@ mod tests {
                 wrong_batches += usize::from(grid.any_contact_among(&batch, &near, Some(kept)) != touched);
                 if lose == 0 {
                     assert_eq!(grid.any_contact_near(&batch, &near, &lo, &hi), touched);
+                    // The query's covers give the tree's boxes that meet the batch's box.
+                    let mut listed = ArrayVec::<Region, BATCH_BOXES>::new();
+                    if grid.gather_covers(&near, &lo, &hi, BATCH_NODES, &mut listed) == Some(Gathered::All) {
+                        let meets = |r: &&Region| (0..3).all(|a| r.hi[a] >= lo[a] && r.lo[a] <= hi[a]);
+                        // In any order: the verdict is whether any box leaves a segment unclear.
+                        let key = |r: &Region| r.lo.iter().chain(&r.hi).map(|v| v.to_bits()).collect::<Vec<_>>();
+                        let mut from_tree: Vec<Region> = gathered.iter().filter(meets).copied().collect();
+                        let mut listed = listed.to_vec();
+                        from_tree.sort_by_key(key);
+                        listed.sort_by_key(key);
+                        assert_eq!(listed, from_tree, "{lo:?}..{hi:?}");
+                        from_near += usize::from(!listed.is_empty());
+                    }
                 }
             }
         }
-        (wrong, wrong_batches, settled, hits)
+        (wrong, wrong_batches, settled, hits, from_near)
     }
 
     /// A segment the gathered boxes call clear touches no cell, and a batch's
-    /// verdict is every segment's exact one; the boxes settle many segments.
+    /// verdict is every segment's exact one; the boxes settle many segments; the
+    /// query's covers give a batch the tree's boxes that meet it.
     #[test]
     fn gathered_boxes_never_clear_a_touching_segment() {
-        let (wrong, wrong_batches, settled, hits) = disagreements(0);
+        let (wrong, wrong_batches, settled, hits, from_near) = disagreements(0);
         assert_eq!((wrong, wrong_batches), (0, 0));
         assert!(settled > 3000 && hits > 1000, "{settled} settled, {hits} hits: the test tests little");
+        assert!(from_near > 1000, "{from_near} batches took boxes from the query's covers");
     }
 
     /// The test above can fail: with the floor's box left out, segments down to
     /// the floor are called clear, and batches touching it called clear.
     #[test]
     fn gathered_boxes_without_the_floor_clear_touching_segments() {
-        let (wrong, wrong_batches, _, _) = disagreements(1);
+        let (wrong, wrong_batches, _, _, _) = disagreements(1);
         assert!(wrong > 0 && wrong_batches > 0, "{wrong} segments, {wrong_batches} batches");
     }
 }

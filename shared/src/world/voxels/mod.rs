@@ -22,6 +22,7 @@ mod batch;
 mod bounds;
 mod cover;
 mod near;
+mod near_covers;
 mod tree;
 mod walk;
 

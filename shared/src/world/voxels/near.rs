@@ -12,9 +12,13 @@
 //! region the tree's test as before. The answer is the tree's either way: `false`
 //! only when no occupied cell's closed cube meets the box.
 
+use super::bounds::Region;
+use super::near_covers::{Gathered, NearCovers};
 use super::tree::BRICK_SHIFT;
 use super::{CellIndex, VoxelGrid};
 use crate::math::Point3;
+use arrayvec::ArrayVec;
+use std::sync::Arc;
 
 /// Most bricks the region spans along an axis: a row of x is one word, a layer's
 /// rows of y are one word.
@@ -46,6 +50,9 @@ pub struct NearBricks {
     rows: Vec<u64>,
     /// Per layer `z − lo z`: bit `y − lo y` set when row (y, z) is not empty.
     layers: Vec<u64>,
+    /// The covers of the region's nodes (shared: a search narrowing the query's
+    /// region for a group of candidates copies the bricks, not the covers).
+    covers: Arc<NearCovers>,
 }
 
 impl Default for NearBricks {
@@ -61,6 +68,7 @@ impl Default for NearBricks {
             ny: 0,
             rows: Vec::new(),
             layers: Vec::new(),
+            covers: Arc::default(),
         }
     }
 }
@@ -184,7 +192,32 @@ impl VoxelGrid {
             rows[(z * ny + y) as usize] |= 1 << x;
             layers[z as usize] |= 1 << y;
         });
+        near.covers = Arc::new(NearCovers::of(self, near.lo.map(|b| b * SIDE), near.hi.map(|b| b * SIDE + SIDE - 1)));
         near
+    }
+
+    /// The covers' boxes near the closed box `[lo, hi]`, holding a batch's
+    /// segments, pushed onto `out` ([`NearCovers::gather`]); `None` when the box
+    /// leaves `near`'s region (the tree must say). No box at all when no occupied
+    /// cell is near the box.
+    #[inline]
+    pub(super) fn gather_covers<const N: usize>(
+        &self,
+        near: &NearBricks,
+        lo: &Point3<f64>,
+        hi: &Point3<f64>,
+        most_nodes: i64,
+        out: &mut ArrayVec<Region, N>,
+    ) -> Option<Gathered> {
+        match near.cells(lo, hi) {
+            Cells::None => Some(Gathered::All),
+            Cells::Outside => None,
+            Cells::Within(first, last) => {
+                let base = near.lo.map(|v| v * SIDE);
+                let absolute = |c: CellIndex| std::array::from_fn(|a| c[a] + base[a]);
+                Some(near.covers.gather(absolute(first), absolute(last), lo, hi, most_nodes, out))
+            }
+        }
     }
 
     /// [`VoxelGrid::may_touch_box`], settled by `near`'s bits when the box's bricks
