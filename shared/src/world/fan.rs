@@ -639,6 +639,19 @@ mod tests {
         targets
     }
 
+    /// The fan's verdict on the sight lines from `sensor` to `targets` (the same
+    /// from both its entry points), and the scan's (the same as the BVH's).
+    fn verdicts(world: &World, fan: &SightFan, sensor: &Point3<f64>, targets: &[Point3<f64>]) -> (bool, bool) {
+        let segments: Vec<Segment> = targets.iter().filter_map(|q| Segment::sight_line(sensor, q, 1e-6)).collect();
+        let lo = segments.iter().fold(*sensor, |lo, s| lo.inf(&s.point_at(s.length)));
+        let hi = segments.iter().fold(*sensor, |hi, s| hi.sup(&s.point_at(s.length)));
+        let want = world.any_contact_by_scan(&segments);
+        assert_eq!(world.any_contact(&segments), want);
+        let got = world.any_sight_contact(fan, sensor, &segments, &lo, &hi);
+        assert_eq!(world.any_sight_line_contact(fan, sensor, targets, 1e-6, &lo, &hi), got);
+        (got, want)
+    }
+
     /// Counts the candidates whose fan verdict differs from the scan's, over random
     /// sensors: anywhere within range, grazing the listed obstacles, directly above
     /// the marker, within a hair of it, and beyond the range.
@@ -669,15 +682,8 @@ mod tests {
                         marker + Vector3::new(l * a.cos(), l * a.sin(), rng.next() * 5.0 - 0.3)
                     }
                 };
-                let segments = sight_lines(&sensor, &marker, radius, theta);
-                let lo = segments.iter().fold(sensor, |lo, s| lo.inf(&s.point_at(s.length)));
-                let hi = segments.iter().fold(sensor, |hi, s| hi.sup(&s.point_at(s.length)));
-                let want = world.any_contact_by_scan(&segments);
-                assert_eq!(world.any_contact(&segments), want);
-                let got = world.any_sight_contact(&fan, &sensor, &segments, &lo, &hi);
+                let (got, want) = verdicts(&world, &fan, &sensor, &targets(&marker, radius, theta));
                 assert!(fan.may_block(&sensor) || !got);
-                let targets = targets(&marker, radius, theta);
-                assert_eq!(world.any_sight_line_contact(&fan, &sensor, &targets, 1e-6, &lo, &hi), got);
                 if got != want {
                     wrong += 1;
                     assert!(pad != FanPad::SAFE, "case {case}, sensor {sensor:?}, theta {theta}: {got} != {want}");
@@ -741,12 +747,7 @@ mod tests {
             for _ in 0..2000 {
                 let (a, l) = (rng.next() * TAU, rng.next() * range);
                 let sensor = marker + Vector3::new(l * a.cos(), l * a.sin(), 0.5 + rng.next() * 4.0);
-                let segments = sight_lines(&sensor, &marker, radius, theta);
-                let lo = segments.iter().fold(sensor, |lo, s| lo.inf(&s.point_at(s.length)));
-                let hi = segments.iter().fold(sensor, |hi, s| hi.sup(&s.point_at(s.length)));
-                let want = world.any_contact_by_scan(&segments);
-                let got = world.any_sight_line_contact(&fan, &sensor, &targets(&marker, radius, theta), 1e-6, &lo, &hi);
-                assert_eq!(world.any_sight_contact(&fan, &sensor, &segments, &lo, &hi), got);
+                let (got, want) = verdicts(&world, &fan, &sensor, &targets(&marker, radius, theta));
                 wrong += usize::from(got != want);
                 if want { hits += 1 } else { misses += 1 }
             }
