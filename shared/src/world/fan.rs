@@ -96,8 +96,9 @@ pub struct SightFan {
     close: Vec<Entry>,
     /// The voxel grid's bricks near every sight line the fan serves.
     bricks: NearBricks,
-    /// How much the footprints, and the reasoning about one sensor's lines, are
-    /// padded ([`FanPad::SAFE`] but in tests).
+    /// How much the footprints, and the reasoning about one sensor's lines against
+    /// the grid's covers, are padded ([`FanPad::SAFE`] but in tests; against a
+    /// solid it is always [`FanPad::SAFE`], a constant the candidate loop folds).
     pad: FanPad,
 }
 
@@ -365,7 +366,11 @@ impl World {
     ) -> bool {
         match (&self.leaves[leaf as usize], &self.voxels) {
             (Leaf::Voxels, Some(v)) => v.any_contact_near_kept(segments, &fan.bricks, lo, hi, |l, h| {
-                !fan.misses_box(sensor, &super::AxisBox { min: Point3::from(*l), max: Point3::from(*h) })
+                !fan.misses_box_padded(
+                    sensor,
+                    &super::AxisBox { min: Point3::from(*l), max: Point3::from(*h) },
+                    fan.pad,
+                )
             }),
             _ => self.leaf_touches_near(leaf, segments, &fan.bricks, lo, hi),
         }
@@ -460,7 +465,7 @@ impl SightFan {
     /// is sure to find no contact.
     #[inline]
     fn misses_cylinder(&self, sensor: &Point3<f64>, cylinder: &super::VerticalCylinder) -> bool {
-        self.misses_cylinder_padded(sensor, cylinder, self.pad)
+        self.misses_cylinder_padded(sensor, cylinder, FanPad::SAFE)
     }
 
     #[inline(always)]
@@ -501,7 +506,7 @@ impl SightFan {
     /// no contact.
     #[inline]
     fn misses_box(&self, sensor: &Point3<f64>, b: &super::AxisBox) -> bool {
-        self.misses_box_padded(sensor, b, self.pad)
+        self.misses_box_padded(sensor, b, FanPad::SAFE)
     }
 
     #[inline(always)]
