@@ -64,25 +64,20 @@ impl VoxelGrid {
             "the batch's box {lo:?}..{hi:?} does not hold its segments"
         );
         let mut regions = ArrayVec::new();
-        let gathered = match self.gather_covers(near, lo, hi, BATCH_NODES, &mut regions) {
-            Some(Gathered::All) => {
-                regions.retain(|r| keep(&r.lo, &r.hi));
-                // No box of the query's covers near the batch: no occupied cell is
-                // near a segment (the query's covers exist only where the boxes'
-                // margin is far above the rounding).
-                if regions.is_empty() {
-                    return false;
-                }
-                Some(regions.as_slice())
-            }
-            Some(Gathered::TooMany) => None,
-            None if self.covers_near(lo, hi, &mut regions).is_some() => {
-                regions.retain(|r| keep(&r.lo, &r.hi));
-                Some(regions.as_slice())
-            }
-            None => None,
+        let from_query = match self.gather_covers(near, lo, hi, BATCH_NODES, &mut regions) {
+            Some(Gathered::All) => true,
+            None if self.covers_near(lo, hi, &mut regions).is_some() => false,
+            // Too many boxes near the batch: each segment gets the exact test.
+            Some(Gathered::TooMany) | None => return self.any_contact_among(segments, near, None),
         };
-        self.any_contact_among(segments, near, gathered)
+        regions.retain(|r| keep(&r.lo, &r.hi));
+        // No box of the query's covers near the batch: no occupied cell is near a
+        // segment (the query's covers exist only where the boxes' margin is far
+        // above the rounding).
+        if from_query && regions.is_empty() {
+            return false;
+        }
+        self.any_contact_among(segments, near, Some(&regions))
     }
 
     /// [`VoxelGrid::any_contact_near`] with the boxes `gathered` near the batch.
